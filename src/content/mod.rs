@@ -1,0 +1,250 @@
+//! Content sources: what the viewer should see in every direction. A source maps a unit world
+//! direction to a position in its [`Atlas`], a padded texel array in which plain bilinear or
+//! bicubic filtering equals seamless filtering of the source (across cube-face edges, across
+//! the ±180° seam of a full panorama, over the poles of an equirectangular image).
+//!
+//! * Cube map: the cube-map table of [`crate::cubemap`].
+//! * Equirectangular: u = 0.5 + lon/hfov, v = 0.5 − lat/vfov, lon = atan2(x, −z),
+//!   lat = asin(y); with hfov = 360, vfov = 180 this is DESIGN.md's u = 0.5 + atan2(x, −z)/2π,
+//!   v = 0.5 − asin(y)/π.
+//! * Cylindrical panorama (seed 001): u = 0.5 + lon/hfov, v = 0.5 − y/(H·√(x² + z²)) with
+//!   H = 2·tan(vfov/2); seed 001 writes v = z/(H·√(x²+y²)) + 0.5 for a z-up frame with v up.
+//!
+//! Each source has its own orientation: the content frame is turned by it before lookup.
+
+mod atlas;
+pub mod pattern;
+
+pub use atlas::{Atlas, PAD};
+
+use crate::cubemap::{self, CubeMap};
+use crate::error::{Error, Result, finite};
+use crate::projection::Orientation;
+use crate::raster::{Pixel, Raster};
+use glam::DVec3;
+use std::f64::consts::PI;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kind {
+    Cube {
+        n: usize,
+    },
+    Panorama {
+        w: usize,
+        h: usize,
+        hfov: f64,
+        vertical: Vertical,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Vertical {
+    /// Latitude linear in v over `vfov` radians.
+    Equirect { vfov: f64 },
+    /// Height on the unit cylinder linear in v over `h` = 2·tan(vfov/2).
+    Cylinder { h: f64 },
+}
+
+/// A content source ready to be sampled.
+#[derive(Debug, Clone)]
+pub struct Content<T> {
+    atlas: Atlas<T>,
+    kind: Kind,
+    orientation: Orientation,
+}
+
+/// Where a direction falls in the atlas: continuous texel coordinates, integers at texel
+/// centres. `None` where the content does not cover the direction.
+pub trait Locate: Sync {
+    fn locate(&self, d: DVec3) -> Option<(f64, f64)>;
+}
+
+fn panorama_fov(name: &str, deg: f64, max: f64) -> Result<f64> {
+    let deg = finite(name, deg)?;
+    if deg <= 0.0 || deg > max {
+        return Err(Error::invalid(
+            name,
+            format!("must be above 0 and at most {max} degrees, got {deg}"),
+        ));
+    }
+    Ok(deg.to_radians())
+}
+
+impl<T: Pixel> Content<T> {
+    pub fn cube(cube: &CubeMap<T>) -> Self {
+        Content {
+            atlas: Atlas::cube(cube),
+            kind: Kind::Cube { n: cube.size },
+            orientation: Orientation::default(),
+        }
+    }
+
+    /// An equirectangular panorama spanning `hfov` × `vfov` degrees, centred on −z.
+    pub fn equirect(image: &Raster<T>, hfov: f64, vfov: f64) -> Result<Self> {
+        let hfov = panorama_fov("content-hfov", hfov, 360.0)?;
+        let vfov = panorama_fov("content-vfov", vfov, 180.0)?;
+        let full = (hfov - 2.0 * PI).abs() < 1e-12;
+        let poles = full && (vfov - PI).abs() < 1e-12;
+        Ok(Content {
+            atlas: Atlas::panorama(image, full, poles)?,
+            kind: Kind::Panorama {
+                w: image.width,
+                h: image.height,
+                hfov,
+                vertical: Vertical::Equirect { vfov },
+            },
+            orientation: Orientation::default(),
+        })
+    }
+
+    /// A cylindrical panorama spanning `hfov` degrees around and `vfov` degrees vertically.
+    pub fn cylindrical(image: &Raster<T>, hfov: f64, vfov: f64) -> Result<Self> {
+        let hfov = panorama_fov("content-hfov", hfov, 360.0)?;
+        let vfov = finite("content-vfov", vfov)?;
+        if vfov <= 0.0 || vfov >= 180.0 {
+            return Err(Error::invalid(
+                "content-vfov",
+                format!("must be above 0 and below 180 degrees for a cylinder, got {vfov}"),
+            ));
+        }
+        let full = (hfov - 2.0 * PI).abs() < 1e-12;
+        Ok(Content {
+            atlas: Atlas::panorama(image, full, false)?,
+            kind: Kind::Panorama {
+                w: image.width,
+                h: image.height,
+                hfov,
+                vertical: Vertical::Cylinder {
+                    h: 2.0 * (vfov.to_radians() / 2.0).tan(),
+                },
+            },
+            orientation: Orientation::default(),
+        })
+    }
+
+    /// Turns the content: a direction d of the world shows the content's C⁻¹·d.
+    pub fn with_orientation(mut self, orientation: Orientation) -> Self {
+        self.orientation = orientation;
+        self
+    }
+
+    pub fn atlas(&self) -> &Atlas<T> {
+        &self.atlas
+    }
+}
+
+impl<T: Pixel> Locate for Content<T> {
+    #[inline]
+    fn locate(&self, d: DVec3) -> Option<(f64, f64)> {
+        let d = self.orientation.apply_inverse(d);
+        let pad = PAD as f64;
+        match self.kind {
+            Kind::Cube { n } => {
+                let (face, s, t) = cubemap::select(d);
+                let nf = n as f64;
+                let y0 = (face.index() * (n + 2 * PAD)) as f64;
+                Some((s * nf - 0.5 + pad, y0 + t * nf - 0.5 + pad))
+            }
+            Kind::Panorama {
+                w,
+                h,
+                hfov,
+                vertical,
+            } => {
+                let u = 0.5 + d.x.atan2(-d.z) / hfov;
+                let rho = d.x.hypot(d.z);
+                let v = match vertical {
+                    Vertical::Equirect { vfov } => 0.5 - d.y.atan2(rho) / vfov,
+                    Vertical::Cylinder { h } => {
+                        if rho == 0.0 {
+                            return None;
+                        }
+                        0.5 - d.y / (rho * h)
+                    }
+                };
+                if !(0.0..=1.0).contains(&u) || !(0.0..=1.0).contains(&v) {
+                    return None;
+                }
+                Some((u * w as f64 - 0.5 + pad, v * h as f64 - 0.5 + pad))
+            }
+        }
+    }
+}
+
+/// How a content image is laid out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// Six faces side by side in omniwarp's order (+X −X +Y −Y +Z −Z).
+    Cubemap,
+    /// ffmpeg v360's `c3x2`.
+    CubemapC3x2,
+    /// ffmpeg v360's `c6x1`.
+    CubemapC6x1,
+    Equirect,
+    Cylindrical,
+}
+
+impl Format {
+    pub const NAMES: [(&'static str, Format); 5] = [
+        ("cubemap", Format::Cubemap),
+        ("cubemap-c3x2", Format::CubemapC3x2),
+        ("cubemap-c6x1", Format::CubemapC6x1),
+        ("equirect", Format::Equirect),
+        ("cylindrical", Format::Cylindrical),
+    ];
+
+    pub fn parse(name: &str) -> Result<Self> {
+        Self::NAMES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, f)| *f)
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::NAMES.iter().map(|(n, _)| *n).collect();
+                Error::invalid(
+                    "content-format",
+                    format!("unknown format `{name}`; known: {}", names.join(", ")),
+                )
+            })
+    }
+
+    /// The cube layout, for the cube-map formats.
+    pub fn cube_layout(self) -> Option<cubemap::Layout> {
+        match self {
+            Format::Cubemap => Some(cubemap::Layout::Strip),
+            Format::CubemapC3x2 => Some(cubemap::Layout::FfmpegC3x2),
+            Format::CubemapC6x1 => Some(cubemap::Layout::FfmpegC6x1),
+            Format::Equirect | Format::Cylindrical => None,
+        }
+    }
+}
+
+impl<T: Pixel> Content<T> {
+    /// Content from an image in the given format. `hfov`/`vfov` (degrees) apply to panoramas
+    /// and default to 360 × 180 (equirect) or 360 × the square-pixel height (cylindrical).
+    pub fn from_image(
+        image: &Raster<T>,
+        format: Format,
+        hfov: Option<f64>,
+        vfov: Option<f64>,
+    ) -> Result<Self> {
+        if let Some(layout) = format.cube_layout() {
+            if hfov.is_some() || vfov.is_some() {
+                return Err(Error::invalid(
+                    "content-hfov",
+                    "a cube map always covers every direction; the field of view is for panoramas",
+                ));
+            }
+            return Ok(Content::cube(&layout.split(image)?));
+        }
+        let hfov = hfov.unwrap_or(360.0);
+        let aspect = image.height as f64 / image.width as f64;
+        match format {
+            Format::Equirect => Content::equirect(image, hfov, vfov.unwrap_or(hfov * aspect)),
+            _ => {
+                // Square pixels at the horizon: the cylinder's height per pixel equals its arc.
+                let default_vfov = || 2.0 * (hfov.to_radians() * aspect / 2.0).atan().to_degrees();
+                Content::cylindrical(image, hfov, vfov.unwrap_or_else(default_vfov))
+            }
+        }
+    }
+}

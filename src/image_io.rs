@@ -1,0 +1,188 @@
+//! Reading and writing images. Every write goes to a temporary file in the target's directory,
+//! is flushed to disk and then renamed over the target, so a crash or a bad input never leaves a
+//! half-written file behind.
+
+use crate::error::{Error, Result};
+use crate::raster::Raster;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+/// An image as read from disk: 8-bit formats stay 8-bit, EXR is float.
+#[derive(Debug, Clone)]
+pub enum Loaded {
+    U8(Raster<[u8; 4]>),
+    F32(Raster<[f32; 4]>),
+}
+
+impl Loaded {
+    pub fn width(&self) -> usize {
+        match self {
+            Loaded::U8(r) => r.width,
+            Loaded::F32(r) => r.width,
+        }
+    }
+
+    pub fn height(&self) -> usize {
+        match self {
+            Loaded::U8(r) => r.height,
+            Loaded::F32(r) => r.height,
+        }
+    }
+}
+
+pub(crate) fn is_exr(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
+/// Reads a PNG or JPEG (as 8-bit RGBA) or an OpenEXR file (as float RGBA; alpha 1 if absent).
+pub fn read_image(path: &Path) -> Result<Loaded> {
+    if is_exr(path) {
+        return read_exr_rgba(path).map(|(r, _)| Loaded::F32(r));
+    }
+    let img = image::open(path).map_err(|e| crate::Error::file(path, e))?;
+    let rgba = img.to_rgba8();
+    let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+    let data = rgba.pixels().map(|p| p.0).collect();
+    Ok(Loaded::U8(Raster {
+        width: w,
+        height: h,
+        data,
+    }))
+}
+
+/// Text attributes of an EXR header, name and value.
+pub type Attributes = Vec<(String, String)>;
+
+/// Reads the first RGBA layer of an EXR file and its text attributes.
+pub fn read_exr_rgba(path: &Path) -> Result<(Raster<[f32; 4]>, Attributes)> {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |res, _| Raster::<[f32; 4]>::new(res.width(), res.height()),
+            |r: &mut Raster<[f32; 4]>, pos, (cr, cg, cb, ca): (f32, f32, f32, f32)| {
+                let w = r.width;
+                r.data[pos.y() * w + pos.x()] = [cr, cg, cb, ca];
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| crate::Error::file(path, e))?;
+    let attrs = image
+        .layer_data
+        .attributes
+        .other
+        .iter()
+        .filter_map(|(k, v)| match v {
+            AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
+            _ => None,
+        })
+        .collect();
+    Ok((image.layer_data.channel_data.pixels, attrs))
+}
+
+/// Writes `path` atomically: `write` fills a temporary file beside it, which replaces `path`
+/// only once complete and synced.
+pub fn atomic_write(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".omniwarp-")
+        .tempfile_in(dir)
+        .map_err(|e| Error::file(dir, e))?;
+    write(tmp.as_file_mut())?;
+    // Temporary files are private (0600); the result should be as readable as any new file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let perms = std::fs::Permissions::from_mode(0o644);
+        tmp.as_file()
+            .set_permissions(perms)
+            .map_err(|e| Error::file(path, e))?;
+    }
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| crate::Error::file(path, e))?;
+    tmp.persist(path).map_err(|e| Error::file(path, e.error))?;
+    // The rename is durable only once the directory entry is.
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+/// Writes an 8-bit RGBA PNG.
+pub fn write_png(path: &Path, img: &Raster<[u8; 4]>) -> Result<()> {
+    let bytes: Vec<u8> = img.data.iter().flatten().copied().collect();
+    atomic_write(path, |f| {
+        let mut w = BufWriter::new(f);
+        let enc = image::codecs::png::PngEncoder::new(&mut w);
+        image::ImageEncoder::write_image(
+            enc,
+            &bytes,
+            img.width as u32,
+            img.height as u32,
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| crate::Error::file(path, e))?;
+        w.flush().map_err(|e| crate::Error::file(path, e))
+    })
+}
+
+/// Float precision of an EXR file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    Float,
+    Half,
+}
+
+/// Writes a float RGBA EXR with text attributes, losslessly compressed.
+pub fn write_exr_rgba(
+    path: &Path,
+    img: &Raster<[f32; 4]>,
+    attributes: &[(String, String)],
+    precision: Precision,
+) -> Result<()> {
+    use exr::prelude::*;
+    let mut attrs = LayerAttributes::named("rgba");
+    for (k, v) in attributes {
+        attrs.other.insert(
+            Text::from(k.as_str()),
+            AttributeValue::Text(Text::from(v.as_str())),
+        );
+    }
+    let size = (img.width, img.height);
+    let px = |p: Vec2<usize>| img.data[p.y() * img.width + p.x()];
+    atomic_write(path, |f| {
+        let w = BufWriter::new(f);
+        let result = match precision {
+            Precision::Float => {
+                let ch = SpecificChannels::rgba(|p: Vec2<usize>| {
+                    let [r, g, b, a] = px(p);
+                    (r, g, b, a)
+                });
+                Image::from_layer(Layer::new(size, attrs, Encoding::FAST_LOSSLESS, ch))
+                    .write()
+                    .to_buffered(w)
+            }
+            Precision::Half => {
+                let ch = SpecificChannels::rgba(|p: Vec2<usize>| {
+                    let [r, g, b, a] = px(p).map(f16::from_f32);
+                    (r, g, b, a)
+                });
+                Image::from_layer(Layer::new(size, attrs, Encoding::FAST_LOSSLESS, ch))
+                    .write()
+                    .to_buffered(w)
+            }
+        };
+        result.map_err(|e| crate::Error::file(path, e))
+    })
+}

@@ -1,0 +1,16 @@
+//! omniwarp: warps for non-planar projection walls with a single centre of projection.
+//!
+//! The data flow and conventions are those of `DESIGN.md`: projection functions δP in
+//! [`projection`], cube maps in [`cubemap`], content sources in [`content`], the CPU reference
+//! renderer in [`render`] and the float normal maps (warp maps) in [`normalmap`].
+
+pub mod content;
+pub mod cubemap;
+pub mod error;
+pub mod image_io;
+pub mod normalmap;
+pub mod projection;
+pub mod raster;
+pub mod render;
+
+pub use error::{Error, Outside, Result};

@@ -1,0 +1,14 @@
+//! The `omniwarp` command: a thin layer over the library.
+
+mod bench;
+mod cli;
+
+use clap::Parser;
+
+fn main() {
+    let args = cli::Cli::parse();
+    if let Err(e) = cli::run(args) {
+        eprintln!("omniwarp: error: {e:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,120 @@
+//! Normal maps (warp maps): per output pixel the unit sampling vector V in world coordinates and
+//! its validity, stored as OpenEXR with R, G, B = V and A = 1 where valid, 0 where nothing is
+//! shown (DESIGN.md). Text attributes in the header say what the map is for:
+//! `omniwarp.projection`, `omniwarp.channel`, `omniwarp.rig_revision` and the like.
+//!
+//! 32-bit float files round-trip bit-exactly. Half-float files are a third of the size; the
+//! angle between a stored and the true vector is then at most about 0.03° (measured by the
+//! test `half_precision_error_is_bounded`: half floats carry 11 significant bits, so each
+//! component is off by up to 2⁻¹² relative).
+
+use crate::error::{Error, Result};
+use crate::image_io::{Precision, read_exr_rgba, write_exr_rgba};
+use crate::projection::View;
+use crate::projection::view::screen_of_pixel;
+use crate::raster::Raster;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::path::Path;
+
+/// A per-pixel map of sampling vectors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NormalMap {
+    pixels: Raster<[f32; 4]>,
+    /// Header attributes, `omniwarp.*` names.
+    pub attributes: Vec<(String, String)>,
+}
+
+/// Largest deviation of a stored vector's length from 1 accepted on reading (half floats
+/// round components by up to 2⁻¹¹ relative).
+const UNIT_TOLERANCE: f32 = 2e-3;
+
+impl NormalMap {
+    /// Samples a view at every pixel centre of a width × height image.
+    pub fn from_view(view: &View, width: u32, height: u32) -> Result<Self> {
+        crate::render::Warp::View(view).check(width, height, 1)?;
+        let (w, h) = (width as usize, height as usize);
+        let mut pixels = Raster::new(w, h);
+        pixels
+            .data
+            .par_chunks_mut(w)
+            .enumerate()
+            .for_each(|(j, row)| {
+                for (i, px) in row.iter_mut().enumerate() {
+                    let (s, t) = screen_of_pixel(i as f64 + 0.5, j as f64 + 0.5, width, height);
+                    *px = match view.direction(s, t) {
+                        Ok(v) => [v.x as f32, v.y as f32, v.z as f32, 1.0],
+                        Err(_) => [0.0; 4],
+                    };
+                }
+            });
+        Ok(NormalMap {
+            pixels,
+            attributes: vec![(
+                "omniwarp.projection".into(),
+                view.projection().name().into(),
+            )],
+        })
+    }
+
+    /// Wraps raw pixels, checking every one: finite, A ∈ [0, 1], unit vector where valid.
+    pub fn from_pixels(
+        pixels: Raster<[f32; 4]>,
+        attributes: Vec<(String, String)>,
+    ) -> Result<Self> {
+        for (n, p) in pixels.data.iter().enumerate() {
+            let (i, j) = (n % pixels.width, n / pixels.width);
+            if p.iter().any(|c| !c.is_finite()) {
+                return Err(Error::invalid(
+                    "normal-map",
+                    format!("pixel ({i}, {j}) holds a non-finite value {p:?}"),
+                ));
+            }
+            if !(0.0..=1.0).contains(&p[3]) {
+                return Err(Error::invalid(
+                    "normal-map",
+                    format!("pixel ({i}, {j}) has validity A = {} outside [0, 1]", p[3]),
+                ));
+            }
+            let len = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            if p[3] > 0.5 && (len - 1.0).abs() > UNIT_TOLERANCE {
+                return Err(Error::invalid(
+                    "normal-map",
+                    format!("pixel ({i}, {j}) is marked valid but its vector has length {len}"),
+                ));
+            }
+        }
+        Ok(NormalMap { pixels, attributes })
+    }
+
+    pub fn width(&self) -> usize {
+        self.pixels.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.pixels.height
+    }
+
+    pub fn pixels(&self) -> &Raster<[f32; 4]> {
+        &self.pixels
+    }
+
+    /// The unit sampling vector of pixel (i, j), `None` where invalid or outside the map.
+    #[inline]
+    pub fn direction(&self, i: usize, j: usize) -> Option<DVec3> {
+        if i >= self.pixels.width || j >= self.pixels.height {
+            return None;
+        }
+        let [x, y, z, a] = self.pixels.get(i, j);
+        (a > 0.5).then(|| DVec3::new(x.into(), y.into(), z.into()).normalize())
+    }
+
+    pub fn write(&self, path: &Path, precision: Precision) -> Result<()> {
+        write_exr_rgba(path, &self.pixels, &self.attributes, precision)
+    }
+
+    pub fn read(path: &Path) -> Result<Self> {
+        let (pixels, attributes) = read_exr_rgba(path)?;
+        Self::from_pixels(pixels, attributes).map_err(|e| Error::file(path, e))
+    }
+}

@@ -1,0 +1,150 @@
+//! Projection functions δP: normalised screen coordinates F = (s, t) ∈ [−1, 1]² to unit view
+//! directions in the local frame (x right, y up, −z forward), and back.
+//!
+//! One file per projection holds only its forward and inverse formulas; the shared work
+//! (content orientation C, off-axis vector O, zoom) lives once in [`view`]. Each projection has
+//! one row in [`REGISTRY`]: its name, what it is, the parameters it takes and its constructor.
+//! A parameter given to a projection that does not use it is an error, not silently ignored.
+
+mod cylindrical;
+mod cylindrical_vertical;
+mod equirect;
+mod fisheye;
+mod perspective;
+pub mod view;
+
+pub use view::{Orientation, View};
+
+use crate::error::{Error, Outside, Result, finite};
+use glam::DVec3;
+use std::fmt::Debug;
+
+/// A single-centre projection function δP and its inverse.
+pub trait Projection: Debug + Send + Sync {
+    /// The registry name of this projection.
+    fn name(&self) -> &'static str;
+    /// δP(s, t): the unit local direction shown at normalised screen position (s, t).
+    fn forward(&self, s: f64, t: f64) -> Result<DVec3, Outside>;
+    /// δP⁻¹(d): the screen position showing the unit local direction `d`.
+    fn inverse(&self, d: DVec3) -> Result<(f64, f64), Outside>;
+}
+
+/// Projection parameters as the user gives them: angles in degrees, `None` when not given.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Params {
+    /// Horizontal field of view, degrees.
+    pub hfov: Option<f64>,
+    /// Vertical field of view, degrees.
+    pub vfov: Option<f64>,
+    /// Image-circle field of view of a fisheye, degrees.
+    pub fov: Option<f64>,
+    /// Forward tilt of a dome's zenith, degrees.
+    pub tilt: Option<f64>,
+    /// Off-axis frustum edges as angles from the view axis, degrees (left and bottom negative).
+    pub left: Option<f64>,
+    pub right: Option<f64>,
+    pub bottom: Option<f64>,
+    pub top: Option<f64>,
+}
+
+impl Params {
+    fn given(&self) -> impl Iterator<Item = &'static str> + '_ {
+        [
+            ("hfov", self.hfov),
+            ("vfov", self.vfov),
+            ("fov", self.fov),
+            ("tilt", self.tilt),
+            ("left", self.left),
+            ("right", self.right),
+            ("bottom", self.bottom),
+            ("top", self.top),
+        ]
+        .into_iter()
+        .filter_map(|(n, v)| v.map(|_| n))
+    }
+}
+
+/// One registry row: everything there is to know about a projection in one place.
+pub struct Entry {
+    pub name: &'static str,
+    /// Other names accepted for it (ffmpeg v360's where they differ).
+    pub aliases: &'static [&'static str],
+    pub description: &'static str,
+    /// The parameters it takes, with their meaning; all in degrees.
+    pub params: &'static [(&'static str, &'static str)],
+    /// Builds it from the parameters and the output aspect ratio height / width, which fills in
+    /// the field of view that is not given so that pixels are square at the image centre.
+    pub build: fn(&Params, f64) -> Result<Box<dyn Projection>>,
+}
+
+/// Every projection omniwarp knows, one row each.
+pub static REGISTRY: &[Entry] = &[
+    perspective::ENTRY,
+    cylindrical::ENTRY,
+    cylindrical_vertical::ENTRY,
+    equirect::ENTRY,
+    fisheye::EQUIDISTANT,
+    fisheye::SPHERICAL,
+    fisheye::EQUISOLID,
+    fisheye::STEREOGRAPHIC,
+    fisheye::ORTHOGRAPHIC,
+    fisheye::DOMEMASTER,
+];
+
+/// Looks a projection up by name or alias.
+pub fn entry(name: &str) -> Result<&'static Entry> {
+    REGISTRY
+        .iter()
+        .find(|e| e.name == name || e.aliases.contains(&name))
+        .ok_or_else(|| {
+            let names: Vec<_> = REGISTRY.iter().map(|e| e.name).collect();
+            Error::invalid(
+                "projection",
+                format!("unknown projection `{name}`; known: {}", names.join(", ")),
+            )
+        })
+}
+
+/// Builds the named projection, rejecting parameters it does not use.
+pub fn build(name: &str, params: &Params, aspect: f64) -> Result<Box<dyn Projection>> {
+    let e = entry(name)?;
+    if let Some(unused) = params
+        .given()
+        .find(|p| !e.params.iter().any(|(n, _)| n == p))
+    {
+        return Err(Error::invalid(
+            unused,
+            format!("not a parameter of projection `{}`", e.name),
+        ));
+    }
+    if !(aspect.is_finite() && aspect > 0.0) {
+        return Err(Error::invalid(
+            "size",
+            "the output must have a positive width and height",
+        ));
+    }
+    (e.build)(params, aspect)
+}
+
+/// Reads an angle parameter in degrees and returns it in radians, checking 0 < angle ≤ max
+/// (or < max when `max_open`).
+pub(crate) fn fov(name: &str, deg: f64, max_deg: f64, max_open: bool) -> Result<f64> {
+    let deg = finite(name, deg)?;
+    let too_big = if max_open {
+        deg >= max_deg
+    } else {
+        deg > max_deg
+    };
+    if deg <= 0.0 || too_big {
+        let bound = if max_open { "below" } else { "at most" };
+        return Err(Error::invalid(
+            name,
+            format!("must be above 0 and {bound} {max_deg} degrees, got {deg}"),
+        ));
+    }
+    Ok(deg.to_radians())
+}
+
+pub(crate) fn missing(projection: &str, what: &str) -> Error {
+    Error::invalid(what, format!("projection `{projection}` needs it"))
+}

@@ -1,0 +1,264 @@
+//! The sample plan: one [`Tap`] per output sample, and the filters that read content through it.
+
+use super::{Filter, Warp, finish, subsample};
+use crate::content::{Atlas, Locate};
+use crate::error::{Error, Result};
+use crate::raster::{Pixel, Raster};
+use rayon::prelude::*;
+
+/// One output sample: the atlas texel at or before the sample position, and the fraction of a
+/// texel beyond it in x and y, in 1/65536 (far below any filter's visible precision).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(C)]
+pub struct Tap {
+    pub idx: u32,
+    pub fx: u16,
+    pub fy: u16,
+}
+
+impl Tap {
+    /// The tap of a sample the content does not cover.
+    pub const NONE: Tap = Tap {
+        idx: u32::MAX,
+        fx: 0,
+        fy: 0,
+    };
+}
+
+/// A warp resolved against one content layout: what every output sample reads.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    width: usize,
+    height: usize,
+    supersample: u32,
+    filter: Filter,
+    atlas_width: usize,
+    atlas_height: usize,
+    taps: Vec<Tap>,
+}
+
+/// Splits a continuous atlas coordinate into texel index and 16-bit fraction.
+#[inline]
+fn split(v: f64) -> (i64, u16) {
+    let base = v.floor();
+    let q = ((v - base) * 65536.0).round() as i64;
+    if q >= 65536 {
+        (base as i64 + 1, 0)
+    } else {
+        (base as i64, q as u16)
+    }
+}
+
+impl Plan {
+    /// Resolves `warp` for a width × height output with k × k supersampling against content
+    /// laid out in `atlas`.
+    pub fn new<T: Pixel>(
+        warp: Warp<'_>,
+        content: &impl Locate,
+        atlas: &Atlas<T>,
+        width: u32,
+        height: u32,
+        supersample: u32,
+        filter: Filter,
+    ) -> Result<Plan> {
+        warp.check(width, height, supersample)?;
+        let k = supersample;
+        let (w, h) = (width as usize, height as usize);
+        let per_row = w * (k * k) as usize;
+        let (aw, ah) = (atlas.width as i64, atlas.height as i64);
+        let mut taps = vec![Tap::NONE; per_row * h];
+        taps.par_chunks_mut(per_row)
+            .enumerate()
+            .for_each(|(j, row)| {
+                let mut n = 0;
+                for i in 0..w {
+                    for b in 0..k {
+                        for a in 0..k {
+                            let (x, y) = subsample(i, j, a, b, k);
+                            let located = warp
+                                .direction(x, y, width, height)
+                                .and_then(|v| content.locate(v));
+                            if let Some((ax, ay)) = located {
+                                let (xi, fx) = split(ax);
+                                let (yi, fy) = split(ay);
+                                // The atlas border keeps every tap of a covered sample inside;
+                                // checking here, once, lets the frame loop index without fear.
+                                if xi >= 1 && yi >= 1 && xi + 2 < aw && yi + 2 < ah {
+                                    row[n] = Tap {
+                                        idx: (yi * aw + xi) as u32,
+                                        fx,
+                                        fy,
+                                    };
+                                }
+                            }
+                            n += 1;
+                        }
+                    }
+                }
+            });
+        Ok(Plan {
+            width: w,
+            height: h,
+            supersample: k,
+            filter,
+            atlas_width: atlas.width,
+            atlas_height: atlas.height,
+            taps,
+        })
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    pub fn taps(&self) -> &[Tap] {
+        &self.taps
+    }
+
+    /// Filters one frame of content through the plan.
+    pub fn render<T: Pixel>(&self, atlas: &Atlas<T>) -> Result<Raster<T>> {
+        let mut out = Raster::new(self.width, self.height);
+        self.render_into(atlas, &mut out)?;
+        Ok(out)
+    }
+
+    /// As [`Plan::render`], into an existing image of the plan's size (no allocation, for
+    /// frame loops).
+    pub fn render_into<T: Pixel>(&self, atlas: &Atlas<T>, out: &mut Raster<T>) -> Result<()> {
+        if (atlas.width, atlas.height) != (self.atlas_width, self.atlas_height) {
+            return Err(Error::invalid(
+                "content",
+                format!(
+                    "the plan was built for a {}×{} atlas, this content's is {}×{}",
+                    self.atlas_width, self.atlas_height, atlas.width, atlas.height
+                ),
+            ));
+        }
+        if (out.width, out.height) != (self.width, self.height) {
+            return Err(Error::invalid(
+                "size",
+                "output image and plan differ in size",
+            ));
+        }
+        let w = self.width;
+        let kk = (self.supersample * self.supersample) as usize;
+        let aw = atlas.width;
+        let data = &atlas.data[..];
+        if self.filter == Filter::Bilinear && kk == 1 {
+            out.data
+                .par_chunks_mut(w)
+                .zip(self.taps.par_chunks(w))
+                .for_each(|(row, taps)| {
+                    for (o, t) in row.iter_mut().zip(taps) {
+                        *o = if t.idx == u32::MAX {
+                            T::default()
+                        } else {
+                            let i = t.idx as usize;
+                            T::bilinear(
+                                data[i],
+                                data[i + 1],
+                                data[i + aw],
+                                data[i + aw + 1],
+                                t.fx,
+                                t.fy,
+                            )
+                        };
+                    }
+                });
+            return Ok(());
+        }
+        let filter = self.filter;
+        out.data
+            .par_chunks_mut(w)
+            .zip(self.taps.par_chunks(w * kk))
+            .for_each(|(row, taps)| {
+                for (o, samples) in row.iter_mut().zip(taps.chunks_exact(kk)) {
+                    let mut acc = [0.0f32; 4];
+                    let mut hits = 0;
+                    for t in samples.iter().filter(|t| t.idx != u32::MAX) {
+                        let v = sample(data, aw, *t, filter);
+                        for (a, c) in acc.iter_mut().zip(v) {
+                            *a += c;
+                        }
+                        hits += 1;
+                    }
+                    *o = finish(acc, hits, kk as u32);
+                }
+            });
+        Ok(())
+    }
+}
+
+/// One filtered sample, in the pixel type's own scale.
+#[inline]
+fn sample<T: Pixel>(data: &[T], aw: usize, t: Tap, filter: Filter) -> [f32; 4] {
+    let i = t.idx as usize;
+    match filter {
+        Filter::Nearest => {
+            let dx = usize::from(t.fx >= 32768);
+            let dy = usize::from(t.fy >= 32768);
+            data[i + dx + dy * aw].to_f32()
+        }
+        Filter::Bilinear => T::bilinear(
+            data[i],
+            data[i + 1],
+            data[i + aw],
+            data[i + aw + 1],
+            t.fx,
+            t.fy,
+        )
+        .to_f32(),
+        Filter::Bicubic => {
+            let wx = catmull_rom(f32::from(t.fx) / 65536.0);
+            let wy = catmull_rom(f32::from(t.fy) / 65536.0);
+            let mut acc = [0.0f32; 4];
+            for (r, wyr) in wy.iter().enumerate() {
+                let base = i + r * aw - aw - 1;
+                for (c, wxc) in wx.iter().enumerate() {
+                    let v = data[base + c].to_f32();
+                    let wgt = wyr * wxc;
+                    for (a, x) in acc.iter_mut().zip(v) {
+                        *a += wgt * x;
+                    }
+                }
+            }
+            acc
+        }
+    }
+}
+
+/// Keys' cubic convolution weights (a = −0.5) for taps at −1, 0, 1, 2 around fraction t.
+#[inline]
+fn catmull_rom(t: f32) -> [f32; 4] {
+    let (t2, t3) = (t * t, t * t * t);
+    [
+        -0.5 * t3 + t2 - 0.5 * t,
+        1.5 * t3 - 2.5 * t2 + 1.0,
+        -1.5 * t3 + 2.0 * t2 + 0.5 * t,
+        0.5 * t3 - 0.5 * t2,
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn catmull_rom_weights_sum_to_one_and_interpolate() {
+        for t in [0.0, 0.25, 0.5, 0.9] {
+            let w = catmull_rom(t);
+            assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+        assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn split_carries_a_fraction_that_rounds_up() {
+        assert_eq!(split(2.999_999_999), (3, 0));
+        assert_eq!(split(-0.5), (-1, 32768));
+    }
+}
