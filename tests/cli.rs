@@ -1,0 +1,379 @@
+//! The `omniwarp` command end to end: good runs write their files, bad flags fail with the flag
+//! named, a non-zero exit and no output file.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn omniwarp(dir: &Path, args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+struct Scene {
+    dir: tempfile::TempDir,
+}
+
+impl Scene {
+    /// A directory holding a small equirect pattern, `eq.png`.
+    fn new() -> Self {
+        let dir = tempfile::tempdir().unwrap();
+        let (ok, err) = omniwarp(
+            dir.path(),
+            &["pattern", "--size", "128x64", "--out", "eq.png"],
+        );
+        assert!(ok, "{err}");
+        Scene { dir }
+    }
+
+    fn run(&self, args: &[&str]) -> (bool, String) {
+        omniwarp(self.dir.path(), args)
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+}
+
+const EQ: [&str; 4] = ["--content", "eq.png", "--content-format", "equirect"];
+
+fn render(extra: &[&str]) -> Vec<String> {
+    let mut v: Vec<String> = ["render"]
+        .iter()
+        .chain(EQ.iter())
+        .map(|s| s.to_string())
+        .collect();
+    v.extend(extra.iter().map(|s| s.to_string()));
+    v
+}
+
+fn strs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+#[test]
+fn render_normal_map_and_cube_layouts_work_end_to_end() {
+    let s = Scene::new();
+    let cyl = render(&[
+        "--projection",
+        "cylindrical",
+        "--hfov",
+        "270",
+        "--vfov",
+        "90",
+        "--size",
+        "96x48",
+        "--out",
+        "cyl.png",
+    ]);
+    let (ok, err) = s.run(&strs(&cyl));
+    assert!(ok, "{err}");
+    let (ok, err) = s.run(&[
+        "normal-map",
+        "--projection",
+        "cylindrical",
+        "--hfov",
+        "270",
+        "--vfov",
+        "90",
+        "--size",
+        "96x48",
+        "--out",
+        "cyl.exr",
+    ]);
+    assert!(ok, "{err}");
+    let via_map = render(&["--normal-map", "cyl.exr", "--out", "cyl-map.png"]);
+    let (ok, err) = s.run(&strs(&via_map));
+    assert!(ok, "{err}");
+    let a = image::open(s.path("cyl.png")).unwrap().to_rgba8();
+    let b = image::open(s.path("cyl-map.png")).unwrap().to_rgba8();
+    assert_eq!(a.dimensions(), (96, 48));
+    let worst = a
+        .pixels()
+        .zip(b.pixels())
+        .flat_map(|(p, q)| (0..4).map(move |k| p.0[k].abs_diff(q.0[k])))
+        .max();
+    assert!(worst <= Some(1), "normal-map render differs by {worst:?}");
+
+    let (ok, err) = s.run(&[
+        "cubemap",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "equirect",
+        "--face-size",
+        "32",
+        "--layout",
+        "c3x2",
+        "--out",
+        "cube.png",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        image::image_dimensions(s.path("cube.png")).unwrap(),
+        (96, 64)
+    );
+    let (ok, err) = s.run(&[
+        "render",
+        "--content",
+        "cube.png",
+        "--content-format",
+        "cubemap-c3x2",
+        "--projection",
+        "fisheye",
+        "--fov",
+        "180",
+        "--filter",
+        "bicubic",
+        "--supersample",
+        "2",
+        "--size",
+        "40x40",
+        "--out",
+        "fish.exr",
+    ]);
+    assert!(ok, "{err}");
+    assert!(s.path("fish.exr").exists());
+    let (ok, err) = s.run(&[
+        "cubemap",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "equirect",
+        "--face-size",
+        "8",
+        "--layout",
+        "faces",
+        "--out",
+        "face-{face}.png",
+    ]);
+    assert!(ok, "{err}");
+    for f in ["px", "nx", "py", "ny", "pz", "nz"] {
+        assert!(s.path(&format!("face-{f}.png")).exists(), "{f}");
+    }
+}
+
+#[test]
+fn bad_input_names_the_flag_and_leaves_no_file() {
+    let s = Scene::new();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--projection", "flat", "--hfov", "400", "--size", "8x8"],
+            "--hfov",
+        ),
+        (
+            &["--projection", "flat", "--hfov", "nan", "--size", "8x8"],
+            "--hfov",
+        ),
+        (&["--projection", "flat", "--size", "8x8"], "--hfov"),
+        (
+            &[
+                "--projection",
+                "warp-drive",
+                "--hfov",
+                "90",
+                "--size",
+                "8x8",
+            ],
+            "--projection",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--tilt",
+                "5",
+                "--size",
+                "8x8",
+            ],
+            "--tilt",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--look-to",
+                "0,1,0",
+                "--look-up",
+                "0,2,0",
+                "--size",
+                "8x8",
+            ],
+            "--look-up",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--look-to",
+                "0,0,0",
+                "--size",
+                "8x8",
+            ],
+            "--look-to",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--offaxis",
+                "1,0,0",
+                "--size",
+                "8x8",
+            ],
+            "--offaxis",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--zoom",
+                "-1",
+                "--size",
+                "8x8",
+            ],
+            "--zoom",
+        ),
+        (
+            &["--projection", "flat", "--hfov", "90", "--size", "0x8"],
+            "--size",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--size",
+                "8x8",
+                "--supersample",
+                "40",
+            ],
+            "--supersample",
+        ),
+        (
+            &[
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--size",
+                "8x8",
+                "--content-hfov",
+                "400",
+            ],
+            "--content-hfov",
+        ),
+    ];
+    for (args, flag) in cases {
+        let mut full = render(args);
+        full.extend(["--out".to_string(), "bad.png".to_string()]);
+        let (ok, err) = s.run(&strs(&full));
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains(flag), "{args:?}: `{err}` does not name {flag}");
+        assert!(!s.path("bad.png").exists(), "{args:?} left bad.png behind");
+    }
+    let (ok, err) = s.run(&[
+        "render",
+        "--content",
+        "missing.png",
+        "--content-format",
+        "equirect",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "8x8",
+        "--out",
+        "x.png",
+    ]);
+    assert!(
+        !ok && err.contains("--content") && err.contains("missing.png"),
+        "{err}"
+    );
+    let (ok, err) = s.run(&[
+        "render",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "cubemap",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "8x8",
+        "--out",
+        "x.png",
+    ]);
+    assert!(
+        !ok && err.contains("--content") && err.contains("6·N"),
+        "{err}"
+    );
+    let (ok, err) = s.run(&[
+        "render",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "equirect",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "8x8",
+        "--out",
+        "x.jpg",
+    ]);
+    assert!(!ok && err.contains("--out"), "{err}");
+    let (ok, err) = s.run(&[
+        "render",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "equirect",
+        "--normal-map",
+        "eq.png",
+        "--out",
+        "x.png",
+    ]);
+    assert!(!ok && err.contains("--normal-map"), "{err}");
+    let names: Vec<_> = std::fs::read_dir(s.dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        names,
+        vec![std::ffi::OsString::from("eq.png")],
+        "files left behind"
+    );
+}
+
+#[test]
+fn projections_lists_every_registry_row() {
+    let out = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .arg("projections")
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    for e in omniwarp::projection::REGISTRY {
+        assert!(text.contains(e.name), "{} missing", e.name);
+    }
+}
