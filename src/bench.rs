@@ -1,12 +1,171 @@
-//! `omniwarp bench`: steady-state throughput of the CPU warp, and the machine's memory
-//! bandwidth for comparison.
+//! `omniwarp bench`: steady-state throughput of the CPU warp (the plan built once, then frames
+//! rendered into one buffer, as a media server runs it), the machine's memory bandwidth, and
+//! the bound that bandwidth puts on the warp.
 
-use anyhow::Result;
+use crate::cli::ProjectionArgs;
+use anyhow::{Context, Result, bail};
 use clap::Args;
+use omniwarp::content::Content;
+use omniwarp::content::pattern::Pattern;
+use omniwarp::cubemap::{CubeMap, Layout};
+use omniwarp::image_io::{self, Loaded};
+use omniwarp::raster::{Pixel, Raster, psnr};
+use omniwarp::render::{Filter, Plan, Warp, render_fn};
+use rayon::prelude::*;
+use std::path::PathBuf;
+use std::time::Instant;
 
 #[derive(Args)]
-pub struct BenchArgs {}
+pub struct BenchArgs {
+    #[command(flatten)]
+    projection: ProjectionArgs,
+    /// Output size WxH in pixels.
+    #[arg(long, value_parser = crate::cli::parse_size, default_value = "1920x1080")]
+    size: (u32, u32),
+    /// Face size of the procedural cube map used as content, pixels.
+    #[arg(long, default_value_t = 1024)]
+    face_size: u32,
+    /// Frames to time after two warm-up frames.
+    #[arg(long, default_value_t = 30)]
+    frames: u32,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Write the procedural cube map in ffmpeg's c6x1 layout here (the peers' input) and exit.
+    #[arg(long)]
+    write_content: Option<PathBuf>,
+    /// Write one rendered frame here (PNG).
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Images (PNG, output size) to score against the exact render of the procedural content,
+    /// e.g. a peer's output for the same input.
+    #[arg(long, num_args = 1..)]
+    psnr_of: Vec<PathBuf>,
+}
 
-pub fn run(_a: BenchArgs) -> Result<()> {
-    anyhow::bail!("not yet")
+pub fn run(a: BenchArgs) -> Result<()> {
+    let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    pool.install(|| bench(&a, threads))
+}
+
+fn to_u8(p: [f32; 4]) -> [u8; 4] {
+    <[u8; 4]>::from_f32(p.map(|c| c * 255.0))
+}
+
+fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
+    let n = a.face_size as usize;
+    let t = Instant::now();
+    let cube = CubeMap::<[u8; 4]>::from_fn(n, 1, |d| to_u8(Pattern::Smooth.eval(d)));
+    if let Some(path) = &a.write_content {
+        image_io::write_png(path, &Layout::FfmpegC6x1.join(&cube))?;
+        println!(
+            "wrote {} ({}s to make)",
+            path.display(),
+            t.elapsed().as_secs_f32()
+        );
+        return Ok(());
+    }
+    let (w, h) = a.size;
+    let view = a.projection.view(w, h)?;
+    let warp = Warp::View(&view);
+    let content = Content::cube(&cube);
+
+    let t = Instant::now();
+    let plan = Plan::new(warp, &content, content.atlas(), w, h, 1, Filter::Bilinear)?;
+    let plan_ms = t.elapsed().as_secs_f64() * 1e3;
+    let mut frame = Raster::new(w as usize, h as usize);
+    for _ in 0..2 {
+        plan.render_into(content.atlas(), &mut frame)?;
+    }
+    let mut times = Vec::with_capacity(a.frames as usize);
+    for _ in 0..a.frames.max(1) {
+        let t = Instant::now();
+        plan.render_into(content.atlas(), &mut frame)?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    let median = times[times.len() / 2];
+    let mpix = f64::from(w) * f64::from(h) / 1e6;
+
+    let bandwidth = copy_bandwidth();
+    // Least traffic a frame needs: the 8-byte tap read, the 4-byte pixel written (and read for
+    // ownership), and at least one 4-byte texel fetched per output pixel.
+    let bytes_per_pixel = 8.0 + 4.0 + 4.0 + 4.0;
+    let bound = bandwidth / bytes_per_pixel / 1e6;
+
+    println!("omniwarp CPU warp, bilinear, RGBA8, {threads} threads");
+    println!("  content          6 × {n}² cube map");
+    println!("  output           {w}×{h} {}", view.projection().name());
+    println!("  plan (once)      {plan_ms:.1} ms");
+    println!(
+        "  frame (median)   {:.2} ms over {} frames (min {:.2}, max {:.2})",
+        median * 1e3,
+        times.len(),
+        times[0] * 1e3,
+        times[times.len() - 1] * 1e3
+    );
+    println!("  throughput       {:.0} Mpixel/s", mpix / median);
+    println!(
+        "  memory copy      {:.1} GB/s (read + write)",
+        bandwidth / 1e9
+    );
+    println!(
+        "  bandwidth bound  {bound:.0} Mpixel/s at {bytes_per_pixel} bytes/pixel; we reach {:.0} %",
+        100.0 * mpix / median / bound
+    );
+
+    let exact = || render_fn(warp, w, h, 1, |d| Pattern::Smooth.eval(d)).map(|r| r.map(to_u8));
+    if a.save.is_some() || !a.psnr_of.is_empty() {
+        let exact = exact()?;
+        let score =
+            |img: &Raster<[u8; 4]>| psnr(img, &exact, 255.0, |x, y| exact.get(x, y)[3] == 255);
+        println!("  PSNR vs exact    omniwarp {:.2} dB", score(&frame));
+        for path in &a.psnr_of {
+            let img = match image_io::read_image(path)
+                .with_context(|| format!("--psnr-of {}", path.display()))?
+            {
+                Loaded::U8(r) => r,
+                Loaded::F32(r) => r.map(to_u8),
+            };
+            if (img.width, img.height) != (frame.width, frame.height) {
+                bail!(
+                    "--psnr-of: {} is {}×{}, the output {w}×{h}",
+                    path.display(),
+                    img.width,
+                    img.height
+                );
+            }
+            println!(
+                "  PSNR vs exact    {} {:.2} dB",
+                path.display(),
+                score(&img)
+            );
+        }
+    }
+    if let Some(path) = &a.save {
+        image_io::write_png(path, &frame)?;
+    }
+    Ok(())
+}
+
+/// Memory bandwidth of a parallel copy of 256 MiB, bytes moved (read + written) per second,
+/// best of five.
+fn copy_bandwidth() -> f64 {
+    let len = 32 << 20;
+    let src = vec![1u64; len];
+    let mut dst = vec![0u64; len];
+    let chunk = len / rayon::current_num_threads().max(1) / 4;
+    let mut best = f64::MAX;
+    for _ in 0..5 {
+        let t = Instant::now();
+        dst.par_chunks_mut(chunk)
+            .zip(src.par_chunks(chunk))
+            .for_each(|(d, s)| d.copy_from_slice(s));
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(&dst);
+    2.0 * (len * 8) as f64 / best
 }

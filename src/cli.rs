@@ -87,7 +87,7 @@ pub struct ProjectionArgs {
 }
 
 impl ProjectionArgs {
-    fn view(&self, width: u32, height: u32) -> Result<View> {
+    pub fn view(&self, width: u32, height: u32) -> Result<View> {
         let name = self
             .projection
             .as_deref()
@@ -286,7 +286,7 @@ fn parse_vec3(s: &str) -> Result<DVec3, String> {
     }
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let parse = |v: &str| {
         v.trim()
             .parse::<u32>()

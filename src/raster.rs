@@ -1,6 +1,8 @@
 //! A plain row-major image of RGBA pixels, top row first, and the two pixel types the renderer
 //! works on: 8-bit ([u8; 4], values 0–255) and float ([f32; 4], nominally 0–1).
 
+use crate::render::Tap;
+
 /// A pixel the renderer can filter. Values stay in the type's own scale (0–255 for 8-bit), so
 /// filtering needs no conversion beyond to and from `f32`.
 pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 'static {
@@ -11,6 +13,26 @@ pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 's
     fn from_f32(v: [f32; 4]) -> Self;
     /// Bilinear blend of the 2×2 neighbourhood a b / c d at fraction (fx, fy) in 1/65536 units.
     fn bilinear(a: Self, b: Self, c: Self, d: Self, fx: u16, fy: u16) -> Self;
+
+    /// Bilinear lookups for a run of taps into an image `stride` pixels wide; a tap that covers
+    /// nothing gives the default (transparent) pixel. The hot loop of the renderer.
+    fn bilinear_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
+        for (o, t) in out.iter_mut().zip(taps) {
+            *o = if t.idx == Tap::NONE.idx {
+                Self::default()
+            } else {
+                let i = t.idx as usize;
+                Self::bilinear(
+                    data[i],
+                    data[i + 1],
+                    data[i + stride],
+                    data[i + stride + 1],
+                    t.fx,
+                    t.fy,
+                )
+            };
+        }
+    }
 }
 
 impl Pixel for [u8; 4] {
@@ -26,17 +48,11 @@ impl Pixel for [u8; 4] {
 
     #[inline(always)]
     fn bilinear(a: Self, b: Self, c: Self, d: Self, fx: u16, fy: u16) -> Self {
-        // 8-bit weights (0..=256) keep every product within u32 and the result exact to
-        // 1/256 of a texel, far below what 8-bit output can show.
-        let wx = (u32::from(fx) + 128) >> 8;
-        let wy = (u32::from(fy) + 128) >> 8;
-        let mut out = [0u8; 4];
-        for k in 0..4 {
-            let top = u32::from(a[k]) * (256 - wx) + u32::from(b[k]) * wx;
-            let bottom = u32::from(c[k]) * (256 - wx) + u32::from(d[k]) * wx;
-            out[k] = ((top * (256 - wy) + bottom * wy + 32768) >> 16) as u8;
-        }
-        out
+        crate::render::kernel::bilinear_rgba8(a, b, c, d, fx, fy)
+    }
+
+    fn bilinear_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
+        crate::render::kernel::bilinear_span_rgba8(data, stride, taps, out);
     }
 }
 

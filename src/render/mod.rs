@@ -6,6 +6,7 @@
 //! The per-frame step reads 8 bytes of plan and 4 texels per output pixel, with integer
 //! arithmetic for 8-bit bilinear output, and runs on all cores (rayon, one task per row).
 
+pub(crate) mod kernel;
 mod plan;
 
 pub use plan::{Plan, Tap};

@@ -6,6 +6,10 @@ use crate::error::{Error, Result};
 use crate::raster::{Pixel, Raster};
 use rayon::prelude::*;
 
+/// Rows per parallel task, and columns per strip within it (see `render_into`).
+const BAND_ROWS: usize = 16;
+const STRIP_COLS: usize = 64;
+
 /// One output sample: the atlas texel at or before the sample position, and the fraction of a
 /// texel beyond it in x and y, in 1/65536 (far below any filter's visible precision).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -149,24 +153,27 @@ impl Plan {
         let aw = atlas.width;
         let data = &atlas.data[..];
         if self.filter == Filter::Bilinear && kk == 1 {
+            // Bands of rows walked in short column strips: neighbouring output rows read
+            // neighbouring texels, so a strip's texels are still in L1 when the next row needs
+            // them, whichever way the warp runs through the texture.
             out.data
-                .par_chunks_mut(w)
-                .zip(self.taps.par_chunks(w))
-                .for_each(|(row, taps)| {
-                    for (o, t) in row.iter_mut().zip(taps) {
-                        *o = if t.idx == u32::MAX {
-                            T::default()
-                        } else {
-                            let i = t.idx as usize;
-                            T::bilinear(
-                                data[i],
-                                data[i + 1],
-                                data[i + aw],
-                                data[i + aw + 1],
-                                t.fx,
-                                t.fy,
-                            )
-                        };
+                .par_chunks_mut(w * BAND_ROWS)
+                .zip(self.taps.par_chunks(w * BAND_ROWS))
+                .for_each(|(band, taps)| {
+                    let rows = band.len() / w;
+                    for x0 in (0..w).step_by(STRIP_COLS) {
+                        let x1 = (x0 + STRIP_COLS).min(w);
+                        for r in 0..rows {
+                            let span = r * w + x0..r * w + x1;
+                            // The next row of this strip: its texels are fetched while this
+                            // row is filtered.
+                            if r + 1 < rows {
+                                for t in &taps[span.start + w..span.end + w] {
+                                    prefetch(data, t.idx as usize, aw);
+                                }
+                            }
+                            T::bilinear_span(data, aw, &taps[span.clone()], &mut band[span]);
+                        }
                     }
                 });
             return Ok(());
@@ -191,6 +198,24 @@ impl Plan {
             });
         Ok(())
     }
+}
+
+/// Asks the processor to start loading the 2×2 block at `i` into the cache.
+#[inline(always)]
+fn prefetch<T>(data: &[T], i: usize, stride: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = data.as_ptr().wrapping_add(i);
+        // SAFETY: a prefetch is a hint that never faults, whatever the address (taps that
+        // cover nothing hold u32::MAX); wrapping_add keeps the pointer arithmetic defined.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(p.cast());
+            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(stride).cast());
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (data, i, stride);
 }
 
 /// One filtered sample, in the pixel type's own scale.
