@@ -150,12 +150,14 @@ enum ContentFormat {
     Equirect,
     /// Cylindrical panorama (seed 001: height linear on the cylinder).
     Cylindrical,
+    /// Six files: --content names them with `{face}`, replaced by px nx py ny pz nz.
+    CubemapFaces,
 }
 
 impl ContentFormat {
     fn format(self) -> Format {
         match self {
-            ContentFormat::Cubemap => Format::Cubemap,
+            ContentFormat::Cubemap | ContentFormat::CubemapFaces => Format::Cubemap,
             ContentFormat::CubemapC3x2 => Format::CubemapC3x2,
             ContentFormat::CubemapC6x1 => Format::CubemapC6x1,
             ContentFormat::Equirect => Format::Equirect,
@@ -367,7 +369,11 @@ enum AnyContent {
 }
 
 fn load_content(a: &ContentArgs, want_float: bool) -> Result<AnyContent> {
-    let loaded = image_io::read_image(&a.content).context("--content")?;
+    let loaded = match a.content_format {
+        ContentFormat::CubemapFaces => image_io::read_cube_faces(&a.content.to_string_lossy()),
+        _ => image_io::read_image(&a.content),
+    }
+    .context("--content")?;
     let orient =
         Orientation::yaw_pitch_roll(a.content_rotate.x, a.content_rotate.y, a.content_rotate.z)
             .map_err(flag_error)?;

@@ -54,6 +54,45 @@ pub fn read_image(path: &Path) -> Result<Loaded> {
 /// Text attributes of an EXR header, name and value.
 pub type Attributes = Vec<(String, String)>;
 
+/// Reads a cube map stored as six images, `pattern` naming them with `{face}` (replaced by px,
+/// nx, py, ny, pz, nz), and returns them side by side in face order (the `Strip` layout).
+pub fn read_cube_faces(pattern: &str) -> Result<Loaded> {
+    use crate::cubemap::{CubeMap, Face, Layout};
+    if !pattern.contains("{face}") {
+        return Err(Error::invalid(
+            "content",
+            format!("`{pattern}` must contain {{face}} to name six face images"),
+        ));
+    }
+    let faces: Vec<Loaded> = Face::ALL
+        .iter()
+        .map(|f| read_image(Path::new(&pattern.replace("{face}", f.label()))))
+        .collect::<Result<_>>()?;
+    let mismatch = || Error::invalid("content", "the six faces mix 8-bit and float images");
+    Ok(match &faces[0] {
+        Loaded::U8(_) => {
+            let f: Vec<_> = faces
+                .into_iter()
+                .map(|l| match l {
+                    Loaded::U8(r) => Ok(r),
+                    Loaded::F32(_) => Err(mismatch()),
+                })
+                .collect::<Result<_>>()?;
+            Loaded::U8(Layout::Strip.join(&CubeMap::from_faces(f.try_into().expect("six"))?))
+        }
+        Loaded::F32(_) => {
+            let f: Vec<_> = faces
+                .into_iter()
+                .map(|l| match l {
+                    Loaded::F32(r) => Ok(r),
+                    Loaded::U8(_) => Err(mismatch()),
+                })
+                .collect::<Result<_>>()?;
+            Loaded::F32(Layout::Strip.join(&CubeMap::from_faces(f.try_into().expect("six"))?))
+        }
+    })
+}
+
 /// Reads the first RGBA layer of an EXR file and its text attributes.
 pub fn read_exr_rgba(path: &Path) -> Result<(Raster<[f32; 4]>, Attributes)> {
     use exr::prelude::*;

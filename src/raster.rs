@@ -6,8 +6,6 @@ use crate::render::Tap;
 /// A pixel the renderer can filter. Values stay in the type's own scale (0–255 for 8-bit), so
 /// filtering needs no conversion beyond to and from `f32`.
 pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 'static {
-    /// The alpha value that means "fully opaque".
-    const OPAQUE: f32;
     fn to_f32(self) -> [f32; 4];
     /// Rounds and clamps where the type needs it.
     fn from_f32(v: [f32; 4]) -> Self;
@@ -36,8 +34,6 @@ pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 's
 }
 
 impl Pixel for [u8; 4] {
-    const OPAQUE: f32 = 255.0;
-
     fn to_f32(self) -> [f32; 4] {
         self.map(f32::from)
     }
@@ -57,8 +53,6 @@ impl Pixel for [u8; 4] {
 }
 
 impl Pixel for [f32; 4] {
-    const OPAQUE: f32 = 1.0;
-
     fn to_f32(self) -> [f32; 4] {
         self
     }

@@ -1,6 +1,7 @@
 //! The `omniwarp` command end to end: good runs write their files, bad flags fail with the flag
 //! named, a non-zero exit and no output file.
 
+use image::GenericImageView;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -157,6 +158,27 @@ fn render_normal_map_and_cube_layouts_work_end_to_end() {
     for f in ["px", "nx", "py", "ny", "pz", "nz"] {
         assert!(s.path(&format!("face-{f}.png")).exists(), "{f}");
     }
+    // Six faces back in, and the strip layout out and in again, give the same render.
+    let (ok, err) = s.run(&[
+        "cubemap",
+        "--content",
+        "face-{face}.png",
+        "--content-format",
+        "cubemap-faces",
+        "--face-size",
+        "8",
+        "--layout",
+        "strip",
+        "--filter",
+        "nearest",
+        "--out",
+        "strip.png",
+    ]);
+    assert!(ok, "{err}");
+    let strip = image::open(s.path("strip.png")).unwrap().to_rgba8();
+    let px = image::open(s.path("face-px.png")).unwrap().to_rgba8();
+    assert_eq!(strip.dimensions(), (48, 8));
+    assert_eq!(strip.view(0, 0, 8, 8).to_image(), px);
 }
 
 #[test]

@@ -29,6 +29,9 @@ pub enum Filter {
     Bicubic,
 }
 
+/// The most samples one render may plan: 2 GiB of taps.
+pub const MAX_SAMPLES: u64 = 1 << 28;
+
 /// Where the sampling vector of each output position comes from.
 #[derive(Debug, Clone, Copy)]
 pub enum Warp<'a> {
@@ -70,6 +73,16 @@ impl Warp<'_> {
             return Err(Error::invalid(
                 "supersample",
                 format!("must be between 1 and 16, got {supersample}"),
+            ));
+        }
+        let samples = u64::from(width) * u64::from(height) * u64::from(supersample).pow(2);
+        if samples > MAX_SAMPLES {
+            return Err(Error::invalid(
+                "size",
+                format!(
+                    "{width}×{height} with {supersample}×{supersample} supersampling is {samples} \
+                     samples; at most {MAX_SAMPLES} fit in memory (8 bytes of plan each)"
+                ),
             ));
         }
         if let Warp::Map(map) = self {
