@@ -12,6 +12,8 @@ use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::{self, Orientation, Params, View};
 use omniwarp::raster::{Pixel, Raster};
 use omniwarp::render::{self, Filter, Warp};
+use omniwarp::tiles::build::Source;
+use omniwarp::tiles::raster::saturation;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -41,6 +43,9 @@ enum Command {
     Projections,
     /// Time the CPU warp (steady state, plan built once) against the memory-bandwidth bound.
     Bench(crate::bench::BenchArgs),
+    /// Projection tile screens: sample, rasterise, chart their accuracy.
+    #[command(subcommand)]
+    Tiles(crate::tiles_cmd::TilesCommand),
 }
 
 #[derive(Args, Clone)]
@@ -88,10 +93,15 @@ pub struct ProjectionArgs {
 
 impl ProjectionArgs {
     pub fn view(&self, width: u32, height: u32) -> Result<View> {
+        self.source(width, height)?.view().map_err(flag_error)
+    }
+
+    /// The projection and view as a tile screen's source.
+    pub fn source(&self, width: u32, height: u32) -> Result<Source> {
         let name = self
             .projection
             .as_deref()
-            .context("missing --projection (or give --normal-map)")?;
+            .context("missing --projection (or give --normal-map or --tiles)")?;
         let params = Params {
             hfov: self.hfov,
             vfov: self.vfov,
@@ -102,15 +112,26 @@ impl ProjectionArgs {
             bottom: self.bottom,
             top: self.top,
         };
-        let p = projection::build(name, &params, f64::from(height) / f64::from(width))
-            .map_err(flag_error)?;
-        let c = Orientation::look(self.look_to, self.look_up).map_err(flag_error)?;
-        View::new(p, c, self.offaxis, self.zoom).map_err(flag_error)
+        let aspect = f64::from(height) / f64::from(width);
+        let source = Source {
+            projection: name.to_string(),
+            params,
+            aspect,
+            look_to: self.look_to.to_array(),
+            look_up: self.look_up.to_array(),
+            offaxis: self.offaxis.to_array(),
+            zoom: self.zoom,
+        };
+        // Checked here so that every error names its flag.
+        projection::build(name, &params, aspect).map_err(flag_error)?;
+        Orientation::look(self.look_to, self.look_up).map_err(flag_error)?;
+        source.view().map_err(flag_error)?;
+        Ok(source)
     }
 }
 
 /// Library errors name parameters as `name`; on the command line they are `--name`.
-fn flag_error(e: omniwarp::Error) -> anyhow::Error {
+pub fn flag_error(e: omniwarp::Error) -> anyhow::Error {
     match e {
         omniwarp::Error::Invalid { name, reason } => anyhow::anyhow!("--{name}: {reason}"),
         other => other.into(),
@@ -182,6 +203,10 @@ struct RenderArgs {
     /// Take the sampling vectors from this normal map (EXR) instead of a projection.
     #[arg(long, conflicts_with = "projection")]
     normal_map: Option<PathBuf>,
+    /// Take the sampling vectors from this tile screen (JSON) instead; its f values scale the
+    /// saturation (seed 000, Figure 5).
+    #[arg(long, conflicts_with_all = ["projection", "normal_map"])]
+    tiles: Option<PathBuf>,
     /// Texture filter.
     #[arg(long, value_enum, default_value = "bilinear")]
     filter: FilterArg,
@@ -343,6 +368,7 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Bench(a) => crate::bench::run(a),
+        Command::Tiles(t) => crate::tiles_cmd::run(t),
     }
 }
 
@@ -445,24 +471,38 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     let (w, h) = match (a.size, &map) {
         (Some(s), _) => s,
         (None, Some(m)) => (m.width() as u32, m.height() as u32),
-        (None, None) => bail!("--size: needed when rendering through a projection"),
+        (None, None) => bail!("--size: needed when rendering through a projection or tiles"),
     };
+    let features = match &a.tiles {
+        Some(path) => Some(crate::tiles_cmd::read_tiles(path)?.feature_map(w as usize, h as usize)),
+        None => None,
+    };
+    let tile_map = features.as_ref().map(|f| f.normal_map());
     let view;
-    let warp = match &map {
-        Some(m) => Warp::Map(m),
-        None => {
+    let warp = match (&map, &tile_map) {
+        (Some(m), _) | (None, Some(m)) => Warp::Map(m),
+        (None, None) => {
             view = a.projection.view(w, h)?;
             Warp::View(&view)
         }
     };
     let content = load_content(&a.content, image_io_is_exr(&a.out))?;
     let (ss, f) = (a.supersample, filter(a.filter));
+    let effect = features.as_ref().map(|f| f.f());
     let img = match &content {
         AnyContent::U8(c) => {
-            AnyRaster::U8(render::render(warp, c, w, h, ss, f).map_err(flag_error)?)
+            let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
+            if let Some(e) = &effect {
+                saturation(&mut r, e);
+            }
+            AnyRaster::U8(r)
         }
         AnyContent::F32(c) => {
-            AnyRaster::F32(render::render(warp, c, w, h, ss, f).map_err(flag_error)?)
+            let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
+            if let Some(e) = &effect {
+                saturation(&mut r, e);
+            }
+            AnyRaster::F32(r)
         }
     };
     write_output(&a.out, img, &[])

@@ -12,5 +12,6 @@ pub mod normalmap;
 pub mod projection;
 pub mod raster;
 pub mod render;
+pub mod tiles;
 
 pub use error::{Error, Outside, Result};

@@ -224,19 +224,11 @@ impl Projection for Fisheye {
     }
 
     fn forward(&self, s: f64, t: f64) -> Result<DVec3, Outside> {
-        let (px, py) = (s * self.sx, t * self.sy);
-        let r = px.hypot(py);
-        let theta = self.radial.theta(r).ok_or_else(|| self.outside())?;
-        if theta > self.theta_max * (1.0 + EDGE_EPS) {
-            return Err(self.outside());
-        }
-        let d = if r == 0.0 {
-            DVec3::NEG_Z
-        } else {
-            let (st, ct) = theta.sin_cos();
-            DVec3::new(st * px / r, st * py / r, -ct)
-        };
-        Ok(self.turn.map_or(d, |m| m * d))
+        self.forward_within(s, t, self.theta_max * (1.0 + EDGE_EPS))
+    }
+
+    fn forward_unbounded(&self, s: f64, t: f64) -> Result<DVec3, Outside> {
+        self.forward_within(s, t, PI)
     }
 
     fn inverse(&self, d: DVec3) -> Result<(f64, f64), Outside> {
@@ -251,5 +243,24 @@ impl Projection for Fisheye {
         }
         let r = self.radial.r(theta);
         Ok((r * d.x / rho / self.sx, r * d.y / rho / self.sy))
+    }
+}
+
+impl Fisheye {
+    /// δP up to angle `limit` from the axis.
+    fn forward_within(&self, s: f64, t: f64, limit: f64) -> Result<DVec3, Outside> {
+        let (px, py) = (s * self.sx, t * self.sy);
+        let r = px.hypot(py);
+        let theta = self.radial.theta(r).ok_or_else(|| self.outside())?;
+        if theta > limit {
+            return Err(self.outside());
+        }
+        let d = if r == 0.0 {
+            DVec3::NEG_Z
+        } else {
+            let (st, ct) = theta.sin_cos();
+            DVec3::new(st * px / r, st * py / r, -ct)
+        };
+        Ok(self.turn.map_or(d, |m| m * d))
     }
 }

@@ -27,23 +27,37 @@ pub trait Projection: Debug + Send + Sync {
     fn forward(&self, s: f64, t: f64) -> Result<DVec3, Outside>;
     /// δP⁻¹(d): the screen position showing the unit local direction `d`.
     fn inverse(&self, d: DVec3) -> Result<(f64, f64), Outside>;
+    /// δP continued past the image's own boundary where the formula still holds (a fisheye
+    /// beyond its image circle); for sampling grids whose tiles straddle that boundary.
+    fn forward_unbounded(&self, s: f64, t: f64) -> Result<DVec3, Outside> {
+        self.forward(s, t)
+    }
 }
 
 /// Projection parameters as the user gives them: angles in degrees, `None` when not given.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Params {
     /// Horizontal field of view, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hfov: Option<f64>,
     /// Vertical field of view, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vfov: Option<f64>,
     /// Image-circle field of view of a fisheye, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fov: Option<f64>,
     /// Forward tilt of a dome's zenith, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tilt: Option<f64>,
     /// Off-axis frustum edges as angles from the view axis, degrees (left and bottom negative).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub left: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub right: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bottom: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub top: Option<f64>,
 }
 

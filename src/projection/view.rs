@@ -137,6 +137,14 @@ impl View {
         Ok((self.orientation.apply(d) - self.offaxis).normalize())
     }
 
+    /// [`View::direction`] through [`Projection::forward_unbounded`].
+    pub fn direction_unbounded(&self, s: f64, t: f64) -> Result<DVec3, Outside> {
+        let d = self
+            .projection
+            .forward_unbounded(s * self.zoom, t * self.zoom)?;
+        Ok((self.orientation.apply(d) - self.offaxis).normalize())
+    }
+
     /// The screen position whose sampling vector points along `v` (any non-zero length).
     pub fn screen(&self, v: DVec3) -> Result<(f64, f64), Outside> {
         let v = v.normalize();

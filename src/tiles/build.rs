@@ -1,0 +1,283 @@
+//! Tile screens sampled from projections, and the combinations of seed 000's Figure 5.
+
+use super::raster::{angles, unwrap_deg};
+use super::{Feature, Interpolation, TileScreen};
+use crate::error::{Error, Result};
+use crate::projection::{self, Orientation, Params, View};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+/// A projection and view transform a tile screen was sampled from (kept so an edit can reset
+/// to it). Angles in degrees, vectors as [x, y, z].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Source {
+    pub projection: String,
+    #[serde(default)]
+    pub params: Params,
+    /// Output height / width the projection was built for.
+    pub aspect: f64,
+    #[serde(default = "ahead")]
+    pub look_to: [f64; 3],
+    #[serde(default = "up")]
+    pub look_up: [f64; 3],
+    #[serde(default)]
+    pub offaxis: [f64; 3],
+    #[serde(default = "one")]
+    pub zoom: f64,
+}
+
+fn ahead() -> [f64; 3] {
+    [0.0, 0.0, -1.0]
+}
+fn up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn one() -> f64 {
+    1.0
+}
+
+impl Source {
+    /// The plain projection, looking ahead.
+    pub fn new(projection: &str, params: Params, aspect: f64) -> Self {
+        Source {
+            projection: projection.into(),
+            params,
+            aspect,
+            look_to: ahead(),
+            look_up: up(),
+            offaxis: [0.0; 3],
+            zoom: 1.0,
+        }
+    }
+
+    pub fn view(&self) -> Result<View> {
+        let p = projection::build(&self.projection, &self.params, self.aspect)?;
+        let c = Orientation::look(
+            DVec3::from_array(self.look_to),
+            DVec3::from_array(self.look_up),
+        )?;
+        View::new(p, c, DVec3::from_array(self.offaxis), self.zoom)
+    }
+}
+
+/// The feature of direction `d` (or an invalid one) at screen position (x, y).
+fn feature(x: f64, y: f64, d: Option<DVec3>, f: f64) -> Feature {
+    let (phi, theta, valid) = match d {
+        Some(d) => {
+            let (p, t) = angles(d);
+            (p, t, true)
+        }
+        None => (0.0, 0.0, false),
+    };
+    Feature {
+        x,
+        y,
+        phi,
+        theta,
+        scale: 1.0,
+        f,
+        valid,
+    }
+}
+
+/// Makes longitudes continuous across the grid (each within 180° of its left neighbour, or of
+/// the one above in the first column), so that tiles never sweep the long way round.
+fn unwrap_grid(columns: usize, features: &mut [Feature]) {
+    for i in 0..features.len() {
+        let (k, l) = (i % columns, i / columns);
+        let reference = match (k, l) {
+            (0, 0) => continue,
+            (0, _) => features[i - columns].phi,
+            _ => features[i - 1].phi,
+        };
+        if features[i].valid {
+            let phi = unwrap_deg(features[i].phi, reference);
+            // Rows that wind round a pole would otherwise drift past the ±360° range.
+            features[i].phi = if phi.abs() > 360.0 {
+                phi - 360.0 * phi.signum()
+            } else {
+                phi
+            };
+        }
+    }
+}
+
+/// A columns × rows grid of features of `dir` (a direction, or `None`, and f per (s, t)).
+pub fn grid_of(
+    columns: usize,
+    rows: usize,
+    dir: impl Fn(f64, f64) -> (Option<DVec3>, f64),
+) -> Result<TileScreen> {
+    if columns < 2 || rows < 2 || columns * rows > 1 << 22 {
+        return Err(Error::invalid(
+            "grid",
+            format!("must be between 2×2 and 4M features, got {columns}×{rows}"),
+        ));
+    }
+    let mut features = Vec::with_capacity(columns * rows);
+    for l in 0..rows {
+        for k in 0..columns {
+            let (x, y) = (
+                k as f64 / (columns - 1) as f64,
+                l as f64 / (rows - 1) as f64,
+            );
+            let (d, f) = dir(2.0 * x - 1.0, 1.0 - 2.0 * y);
+            features.push(feature(x, y, d, f));
+        }
+    }
+    unwrap_grid(columns, &mut features);
+    let mut t = TileScreen::grid(columns, rows, features)?;
+    t.interpolation = Interpolation::Vectors;
+    Ok(t)
+}
+
+/// Samples a projection into a columns × rows grid; features past a fisheye's image circle
+/// continue its formula, so the tiles along the circle still reach it.
+pub fn from_source(source: &Source, columns: usize, rows: usize) -> Result<TileScreen> {
+    let view = source.view()?;
+    let mut t = grid_of(columns, rows, |s, t| {
+        (view.direction_unbounded(s, t).ok(), 1.0)
+    })?;
+    t.source = Some(source.clone());
+    Ok(t)
+}
+
+/// Seed 000, Figure 5A: a planar perspective in the centre, cylindrical to the sides.
+///
+/// The planar part covers `planar_hfov` degrees across the middle `planar_width` of the screen
+/// (a fraction of its width); the cylinder continues to `hfov` in all. The cylinder's height
+/// scale is the planar part's vertical scale times cos(planar_hfov/2), which makes the two meet
+/// without a step. f falls from 1 in the planar part to 0.25 at the outer edges: the Figure's
+/// saturation falloff.
+pub fn planar_with_cylindrical_sides(
+    hfov: f64,
+    planar_hfov: f64,
+    vfov: f64,
+    planar_width: f64,
+    columns: usize,
+    rows: usize,
+) -> Result<TileScreen> {
+    let check = |name: &str, v: f64, lo: f64, hi: f64| {
+        if v.is_finite() && v > lo && v < hi {
+            Ok(v)
+        } else {
+            Err(Error::invalid(
+                name,
+                format!("must lie strictly between {lo} and {hi}, got {v}"),
+            ))
+        }
+    };
+    let hfov = check("hfov", hfov, 0.0, 360.0 + 1e-9)?.to_radians();
+    let hc = check("planar-hfov", planar_hfov, 0.0, 180.0)?.to_radians();
+    let tv = (check("vfov", vfov, 0.0, 180.0)?.to_radians() / 2.0).tan();
+    let s0 = check("planar-width", planar_width, 0.0, 1.0)?;
+    if hc >= hfov {
+        return Err(Error::invalid("planar-hfov", "must be smaller than hfov"));
+    }
+    let th = (hc / 2.0).tan();
+    grid_of(columns, rows, |s, t| {
+        if s.abs() <= s0 {
+            (Some(DVec3::new(s / s0 * th, t * tv, -1.0).normalize()), 1.0)
+        } else {
+            let u = (s.abs() - s0) / (1.0 - s0);
+            let lon = s.signum() * (hc / 2.0 + u * (hfov / 2.0 - hc / 2.0));
+            let h = t * tv * (hc / 2.0).cos();
+            (
+                Some(DVec3::new(lon.sin(), h, -lon.cos()).normalize()),
+                1.0 - 0.75 * u,
+            )
+        }
+    })
+}
+
+/// A planar inset in a cylindrical view (seed 000, Figure 5B).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inset {
+    /// Tile range covered: columns k0..k1 and rows l0..l1 of tiles.
+    pub tiles: (usize, usize, usize, usize),
+    /// Where the inset looks: longitude and latitude, degrees.
+    pub look: (f64, f64),
+    /// Horizontal field of view of the inset, degrees.
+    pub hfov: f64,
+}
+
+/// Seed 000, Figure 5B: a cylindrical view with planar insets, as a triangle soup so that the
+/// insets' borders are hard transitions. f is 1 inside an inset and 0.3 outside.
+pub fn cylinder_with_planar_insets(
+    hfov: f64,
+    vfov: f64,
+    columns: usize,
+    rows: usize,
+    insets: &[Inset],
+) -> Result<TileScreen> {
+    let base = Source::new(
+        "cylindrical",
+        Params {
+            hfov: Some(hfov),
+            vfov: Some(vfov),
+            ..Params::default()
+        },
+        1.0,
+    )
+    .view()?;
+    let grid = grid_of(columns, rows, |s, t| (base.direction(s, t).ok(), 0.3))?;
+    let mut views = Vec::new();
+    for (n, inset) in insets.iter().enumerate() {
+        let (k0, k1, l0, l1) = inset.tiles;
+        if k0 >= k1 || l0 >= l1 || k1 >= columns || l1 >= rows {
+            return Err(Error::invalid(
+                format!("insets[{n}]"),
+                format!(
+                    "tile range {k0}..{k1} × {l0}..{l1} is empty or outside the {columns}×{rows} grid"
+                ),
+            ));
+        }
+        let look = super::raster::f_normal(inset.look.0, inset.look.1, 1.0);
+        // The inset's own frame: its rectangle's aspect sets the vertical field of view.
+        let (x0, x1) = (
+            k0 as f64 / (columns - 1) as f64,
+            k1 as f64 / (columns - 1) as f64,
+        );
+        let (y0, y1) = (l0 as f64 / (rows - 1) as f64, l1 as f64 / (rows - 1) as f64);
+        let aspect = (y1 - y0) / (x1 - x0);
+        let p = projection::build(
+            "flat",
+            &Params {
+                hfov: Some(inset.hfov),
+                ..Params::default()
+            },
+            aspect,
+        )
+        .map_err(|e| Error::invalid(format!("insets[{n}].hfov"), e.to_string()))?;
+        let view = View::new(p, Orientation::look(look, DVec3::Y)?, DVec3::ZERO, 1.0)?;
+        views.push((x0, x1, y0, y1, view));
+    }
+    let mut triangles = Vec::new();
+    for (tri, _) in grid.triangles() {
+        let (cx, cy) = (
+            (tri[0].x + tri[1].x + tri[2].x) / 3.0,
+            (tri[0].y + tri[1].y + tri[2].y) / 3.0,
+        );
+        let inside = views
+            .iter()
+            .find(|v| cx > v.0 && cx < v.1 && cy > v.2 && cy < v.3);
+        let tri = match inside {
+            None => tri,
+            Some((x0, x1, y0, y1, view)) => tri.map(|f| {
+                let (s, t) = (
+                    2.0 * (f.x - x0) / (x1 - x0) - 1.0,
+                    1.0 - 2.0 * (f.y - y0) / (y1 - y0),
+                );
+                feature(f.x, f.y, view.direction(s, t).ok(), 1.0)
+            }),
+        };
+        let mut tri = tri;
+        tri[1].phi = unwrap_deg(tri[1].phi, tri[0].phi);
+        tri[2].phi = unwrap_deg(tri[2].phi, tri[0].phi);
+        triangles.push(tri);
+    }
+    let mut t = TileScreen::soup(triangles)?;
+    t.interpolation = Interpolation::Vectors;
+    Ok(t)
+}

@@ -1,0 +1,253 @@
+//! Edits of a tile screen. Each returns a new screen with the revision increased, or an error
+//! that says why the edit was refused; a refused edit changes nothing, and no edit can leave a
+//! non-finite value or a folded-over tile behind (the result is validated before it is returned).
+
+use super::build::{Source, from_source, grid_of};
+use super::raster::unwrap_deg;
+use super::{Feature, Layout, TileScreen};
+use crate::error::{Error, Result};
+
+/// One change to a tile screen.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Edit {
+    /// Sets any of a grid feature's angles, scale and f (column k, row l).
+    SetFeature {
+        column: usize,
+        row: usize,
+        phi: Option<f64>,
+        theta: Option<f64>,
+        scale: Option<f64>,
+        f: Option<f64>,
+    },
+    /// Resamples the features of columns k0..=k1, rows l0..=l1 from another projection and view,
+    /// which then spans that region of the screen (s, t = ±1 at its edges).
+    SetRegion {
+        columns: (usize, usize),
+        rows: (usize, usize),
+        source: Source,
+    },
+    /// Inserts a row of features halfway between rows `at − 1` and `at`.
+    InsertRow {
+        at: usize,
+    },
+    /// Inserts a column of features halfway between columns `at − 1` and `at`.
+    InsertColumn {
+        at: usize,
+    },
+    RemoveRow {
+        at: usize,
+    },
+    RemoveColumn {
+        at: usize,
+    },
+    /// Replaces every inner feature's angles, scale and f by the mean of its four neighbours,
+    /// `iterations` times; the border stays, so the screen keeps its extent.
+    Smooth {
+        iterations: usize,
+    },
+    /// Back to the projection the screen was sampled from, at the current grid size.
+    Reset,
+}
+
+fn grid_parts(t: &TileScreen) -> Result<(usize, usize, &Vec<Feature>)> {
+    match &t.layout {
+        Layout::Grid {
+            columns,
+            rows,
+            features,
+        } => Ok((*columns, *rows, features)),
+        Layout::Soup { .. } => Err(Error::invalid(
+            "tiles",
+            "this edit needs a grid, not a triangle soup",
+        )),
+    }
+}
+
+fn index_in(name: &str, i: usize, n: usize) -> Result<usize> {
+    if i < n {
+        Ok(i)
+    } else {
+        Err(Error::invalid(name, format!("{i} is outside 0..{}", n - 1)))
+    }
+}
+
+/// Midpoint of two features, the longitudes taken the short way round.
+fn midpoint(a: &Feature, b: &Feature) -> Feature {
+    Feature {
+        x: (a.x + b.x) / 2.0,
+        y: (a.y + b.y) / 2.0,
+        phi: (a.phi + unwrap_deg(b.phi, a.phi)) / 2.0,
+        theta: (a.theta + b.theta) / 2.0,
+        scale: (a.scale + b.scale) / 2.0,
+        f: (a.f + b.f) / 2.0,
+        valid: a.valid && b.valid,
+    }
+}
+
+impl TileScreen {
+    /// Applies `edit`, returning the new screen (revision + 1) or why it was refused.
+    pub fn edit(&self, edit: &Edit) -> Result<TileScreen> {
+        let mut next = self.clone();
+        next.revision = self.revision + 1;
+        match edit {
+            Edit::SetFeature {
+                column,
+                row,
+                phi,
+                theta,
+                scale,
+                f,
+            } => {
+                let (c, r, _) = grid_parts(self)?;
+                let (k, l) = (index_in("column", *column, c)?, index_in("row", *row, r)?);
+                let Layout::Grid { features, .. } = &mut next.layout else {
+                    unreachable!()
+                };
+                let feat = &mut features[l * c + k];
+                if let Some(v) = phi {
+                    feat.phi = *v;
+                }
+                if let Some(v) = theta {
+                    feat.theta = *v;
+                }
+                if let Some(v) = scale {
+                    feat.scale = *v;
+                }
+                if let Some(v) = f {
+                    feat.f = *v;
+                }
+            }
+            Edit::SetRegion {
+                columns,
+                rows,
+                source,
+            } => {
+                let view = source.view()?;
+                let (c, r, _) = grid_parts(self)?;
+                let (k0, k1) = (
+                    index_in("columns", columns.0, c)?,
+                    index_in("columns", columns.1, c)?,
+                );
+                let (l0, l1) = (index_in("rows", rows.0, r)?, index_in("rows", rows.1, r)?);
+                if k0 >= k1 || l0 >= l1 {
+                    return Err(Error::invalid(
+                        "columns",
+                        "a region needs at least one tile",
+                    ));
+                }
+                let Layout::Grid { features, .. } = &mut next.layout else {
+                    unreachable!()
+                };
+                let region = grid_of(k1 - k0 + 1, l1 - l0 + 1, |s, t| {
+                    (view.direction(s, t).ok(), 1.0)
+                })?;
+                let Layout::Grid {
+                    features: fresh, ..
+                } = region.layout
+                else {
+                    unreachable!()
+                };
+                for l in l0..=l1 {
+                    for k in k0..=k1 {
+                        let src = fresh[(l - l0) * (k1 - k0 + 1) + (k - k0)];
+                        let dst = &mut features[l * c + k];
+                        // Keep the screen positions; only what is seen there changes.
+                        let (x, y, f) = (dst.x, dst.y, dst.f);
+                        *dst = Feature { x, y, f, ..src };
+                    }
+                }
+            }
+            Edit::InsertRow { at } | Edit::InsertColumn { at } => {
+                let (c, r, f) = grid_parts(self)?;
+                let row = matches!(edit, Edit::InsertRow { .. });
+                let n = if row { r } else { c };
+                if *at == 0 || *at >= n {
+                    return Err(Error::invalid(
+                        "at",
+                        format!("must lie in 1..{}, got {at}", n - 1),
+                    ));
+                }
+                let mut out = Vec::with_capacity(f.len() + if row { c } else { r });
+                for l in 0..r {
+                    if row && l == *at {
+                        out.extend((0..c).map(|k| midpoint(&f[(l - 1) * c + k], &f[l * c + k])));
+                    }
+                    for k in 0..c {
+                        if !row && k == *at {
+                            out.push(midpoint(&f[l * c + k - 1], &f[l * c + k]));
+                        }
+                        out.push(f[l * c + k]);
+                    }
+                }
+                let (c, r) = if row { (c, r + 1) } else { (c + 1, r) };
+                next.layout = Layout::Grid {
+                    columns: c,
+                    rows: r,
+                    features: out,
+                };
+            }
+            Edit::RemoveRow { at } | Edit::RemoveColumn { at } => {
+                let (c, r, f) = grid_parts(self)?;
+                let row = matches!(edit, Edit::RemoveRow { .. });
+                let n = if row { r } else { c };
+                index_in("at", *at, n)?;
+                if n <= 2 {
+                    return Err(Error::invalid(
+                        "at",
+                        "a grid keeps at least 2 rows and 2 columns",
+                    ));
+                }
+                let out: Vec<Feature> = f
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| if row { i / c != *at } else { i % c != *at })
+                    .map(|(_, v)| *v)
+                    .collect();
+                let (c, r) = if row { (c, r - 1) } else { (c - 1, r) };
+                next.layout = Layout::Grid {
+                    columns: c,
+                    rows: r,
+                    features: out,
+                };
+            }
+            Edit::Smooth { iterations } => {
+                let (c, r, _) = grid_parts(self)?;
+                let Layout::Grid { features, .. } = &mut next.layout else {
+                    unreachable!()
+                };
+                for _ in 0..*iterations {
+                    let before = features.clone();
+                    for l in 1..r - 1 {
+                        for k in 1..c - 1 {
+                            let me = before[l * c + k];
+                            let n = [
+                                before[l * c + k - 1],
+                                before[l * c + k + 1],
+                                before[(l - 1) * c + k],
+                                before[(l + 1) * c + k],
+                            ];
+                            let mean = |g: fn(&Feature) -> f64| n.iter().map(g).sum::<f64>() / 4.0;
+                            let phi =
+                                n.iter().map(|v| unwrap_deg(v.phi, me.phi)).sum::<f64>() / 4.0;
+                            let f = &mut features[l * c + k];
+                            f.phi = phi;
+                            f.theta = mean(|v| v.theta);
+                            f.scale = mean(|v| v.scale);
+                            f.f = mean(|v| v.f);
+                        }
+                    }
+                }
+            }
+            Edit::Reset => {
+                let (c, r, _) = grid_parts(self)?;
+                let source = self.source.as_ref().ok_or_else(|| {
+                    Error::invalid("tiles", "has no source projection to reset to")
+                })?;
+                let fresh = from_source(source, c, r)?;
+                next.layout = fresh.layout;
+            }
+        }
+        next.validate()?;
+        Ok(next)
+    }
+}
