@@ -215,6 +215,8 @@ fn chart(out: &Path) -> Result<()> {
             .build_cartesian_2d((2.0f64..160.0).log_scale(), (0.001f64..100.0).log_scale())?;
         chart
             .configure_mesh()
+            .max_light_lines(1)
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .x_desc("grid columns (rows follow the output's aspect)")
             .y_desc("largest error, degrees")
             .draw()?;
