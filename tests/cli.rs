@@ -403,25 +403,154 @@ fn projections_lists_every_registry_row() {
 #[test]
 fn tile_screens_from_the_command_line() {
     let s = Scene::new();
-    let (ok, err) = s.run(&["tiles", "from-projection", "--projection", "fisheye", "--fov", "180", "--size", "64x64", "--tolerance-px", "0.5", "--out", "fish.json"]);
+    let (ok, err) = s.run(&[
+        "tiles",
+        "from-projection",
+        "--projection",
+        "fisheye",
+        "--fov",
+        "180",
+        "--size",
+        "64x64",
+        "--tolerance-px",
+        "0.5",
+        "--out",
+        "fish.json",
+    ]);
     assert!(ok, "{err}");
     let json = std::fs::read_to_string(s.path("fish.json")).unwrap();
-    assert!(json.contains("\"format\": 1") && json.contains("\"vectors\""), "{json}");
-    let (ok, err) = s.run(&["tiles", "normal-map", "fish.json", "--size", "64x64", "--out", "fish.exr"]);
+    assert!(
+        json.contains("\"format\": 1") && json.contains("\"vectors\""),
+        "{json}"
+    );
+    let (ok, err) = s.run(&[
+        "tiles",
+        "normal-map",
+        "fish.json",
+        "--size",
+        "64x64",
+        "--out",
+        "fish.exr",
+    ]);
     assert!(ok, "{err}");
-    let (ok, err) = s.run(&["render", "--content", "eq.png", "--content-format", "equirect", "--tiles", "fish.json", "--size", "64x64", "--out", "fish.png"]);
+    let (ok, err) = s.run(&[
+        "render",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "equirect",
+        "--tiles",
+        "fish.json",
+        "--size",
+        "64x64",
+        "--out",
+        "fish.png",
+    ]);
     assert!(ok, "{err}");
-    let (ok, err) = s.run(&["tiles", "from-projection", "--projection", "cylindrical", "--hfov", "270", "--vfov", "90", "--size", "64x32", "--grid", "9x5", "--out", "cyl.json"]);
+    let (ok, err) = s.run(&[
+        "tiles",
+        "from-projection",
+        "--projection",
+        "cylindrical",
+        "--hfov",
+        "270",
+        "--vfov",
+        "90",
+        "--size",
+        "64x32",
+        "--grid",
+        "9x5",
+        "--out",
+        "cyl.json",
+    ]);
     assert!(ok, "{err}");
     for (args, flag) in [
-        (vec!["tiles", "from-projection", "--projection", "flat", "--hfov", "90", "--size", "8x8", "--grid", "1x4", "--out", "bad.json"], "grid"),
-        (vec!["tiles", "from-projection", "--projection", "flat", "--hfov", "90", "--size", "8x8", "--tolerance-deg", "-1", "--out", "bad.json"], "--tolerance-deg"),
-        (vec!["tiles", "from-projection", "--projection", "flat", "--hfov", "190", "--size", "8x8", "--grid", "3x3", "--out", "bad.json"], "--hfov"),
-        (vec!["tiles", "normal-map", "eq.png", "--size", "8x8", "--out", "bad.exr"], "--tiles"),
-        (vec!["render", "--content", "eq.png", "--content-format", "equirect", "--tiles", "missing.json", "--size", "8x8", "--out", "bad.png"], "--tiles"),
+        (
+            vec![
+                "tiles",
+                "from-projection",
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--size",
+                "8x8",
+                "--grid",
+                "1x4",
+                "--out",
+                "bad.json",
+            ],
+            "grid",
+        ),
+        (
+            vec![
+                "tiles",
+                "from-projection",
+                "--projection",
+                "flat",
+                "--hfov",
+                "90",
+                "--size",
+                "8x8",
+                "--tolerance-deg",
+                "-1",
+                "--out",
+                "bad.json",
+            ],
+            "--tolerance-deg",
+        ),
+        (
+            vec![
+                "tiles",
+                "from-projection",
+                "--projection",
+                "flat",
+                "--hfov",
+                "190",
+                "--size",
+                "8x8",
+                "--grid",
+                "3x3",
+                "--out",
+                "bad.json",
+            ],
+            "--hfov",
+        ),
+        (
+            vec![
+                "tiles",
+                "normal-map",
+                "eq.png",
+                "--size",
+                "8x8",
+                "--out",
+                "bad.exr",
+            ],
+            "--tiles",
+        ),
+        (
+            vec![
+                "render",
+                "--content",
+                "eq.png",
+                "--content-format",
+                "equirect",
+                "--tiles",
+                "missing.json",
+                "--size",
+                "8x8",
+                "--out",
+                "bad.png",
+            ],
+            "--tiles",
+        ),
     ] {
         let (ok, err) = s.run(&args);
         assert!(!ok && err.contains(flag), "{args:?}: {err}");
-        assert!(!s.path("bad.json").exists() && !s.path("bad.exr").exists() && !s.path("bad.png").exists());
+        assert!(
+            !s.path("bad.json").exists()
+                && !s.path("bad.exr").exists()
+                && !s.path("bad.png").exists()
+        );
     }
 }

@@ -42,10 +42,17 @@ pub(crate) fn bilinear_span_rgba8(
     out: &mut [[u8; 4]],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("ssse3") {
-        // SAFETY: the processor supports SSSE3, checked just above.
-        unsafe { span_ssse3(data, stride, taps, out) };
-        return;
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor supports AVX2 (and so SSSE3), checked just above.
+            unsafe { span_avx2(data, stride, taps, out) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("ssse3") {
+            // SAFETY: the processor supports SSSE3, checked just above.
+            unsafe { span_ssse3(data, stride, taps, out) };
+            return;
+        }
     }
     span_portable(data, stride, taps, out);
 }
@@ -104,6 +111,82 @@ unsafe fn span_ssse3(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[
     }
 }
 
+/// Two pixels at a time: the SSSE3 kernel's steps on both 128-bit halves of AVX2 registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn span_avx2(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[u8; 4]]) {
+    use std::arch::x86_64::*;
+    let end = data.len().saturating_sub(stride + 1);
+    let base = data.as_ptr().cast::<u8>();
+    let round = _mm256_set1_epi32(1 << 13);
+    let pairs = taps.len() / 2;
+    for p in 0..pairs {
+        let (t0, t1) = (taps[2 * p], taps[2 * p + 1]);
+        let (i0, i1) = (t0.idx as usize, t1.idx as usize);
+        if i0 >= end || i1 >= end {
+            // SAFETY: SSSE3 is part of AVX2.
+            unsafe {
+                span_ssse3(
+                    data,
+                    stride,
+                    &taps[2 * p..2 * p + 2],
+                    &mut out[2 * p..2 * p + 2],
+                )
+            };
+            continue;
+        }
+        let (wx0, wy0) = weights(t0.fx, t0.fy);
+        let (wx1, wy1) = weights(t1.fx, t1.fy);
+        let wy = |w: i32| {
+            let h = (w << 8) | (64 - w);
+            h | (h << 16)
+        };
+        let wx = |w: i32| (w << 16) | (256 - w);
+        // SAFETY: i0 and i1 + stride + 1 lie inside `data` (checked above), so the four 8-byte
+        // loads are in bounds; the rest only touches registers.
+        let v = unsafe {
+            let cols = |i: usize| {
+                let top = _mm_loadl_epi64(base.add(4 * i).cast());
+                let bottom = _mm_loadl_epi64(base.add(4 * (i + stride)).cast());
+                _mm_unpacklo_epi8(top, bottom)
+            };
+            let both = _mm256_set_m128i(cols(i1), cols(i0));
+            let wyv = _mm256_setr_epi32(
+                wy(wy0),
+                wy(wy0),
+                wy(wy0),
+                wy(wy0),
+                wy(wy1),
+                wy(wy1),
+                wy(wy1),
+                wy(wy1),
+            );
+            let vert = _mm256_maddubs_epi16(both, wyv);
+            let lr = _mm256_unpacklo_epi16(vert, _mm256_srli_si256(vert, 8));
+            let wxv = _mm256_setr_epi32(
+                wx(wx0),
+                wx(wx0),
+                wx(wx0),
+                wx(wx0),
+                wx(wx1),
+                wx(wx1),
+                wx(wx1),
+                wx(wx1),
+            );
+            let v = _mm256_srli_epi32(_mm256_add_epi32(_mm256_madd_epi16(lr, wxv), round), 14);
+            let v = _mm256_packs_epi32(v, v);
+            _mm256_packus_epi16(v, v)
+        };
+        out[2 * p] = (_mm256_cvtsi256_si32(v) as u32).to_le_bytes();
+        out[2 * p + 1] = (_mm256_extract_epi32::<4>(v) as u32).to_le_bytes();
+    }
+    if taps.len() % 2 == 1 {
+        let last = taps.len() - 1;
+        // SAFETY: SSSE3 is part of AVX2.
+        unsafe { span_ssse3(data, stride, &taps[last..], &mut out[last..]) };
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,6 +233,20 @@ mod tests {
         bilinear_span_rgba8(&data, stride, &taps, &mut fast);
         span_portable(&data, stride, &taps, &mut slow);
         assert_eq!(fast, slow);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // Both SIMD kernels, odd lengths included.
+            for n in [taps.len(), taps.len() - 1] {
+                let (mut a, mut b) = (vec![[1u8; 4]; n], vec![[2u8; 4]; n]);
+                // SAFETY: the processor supports AVX2 and SSSE3, checked just above.
+                unsafe {
+                    span_avx2(&data, stride, &taps[..n], &mut a);
+                    span_ssse3(&data, stride, &taps[..n], &mut b);
+                }
+                assert_eq!(a, slow[..n]);
+                assert_eq!(b, slow[..n]);
+            }
+        }
         // Corners reproduce the texels exactly.
         assert_eq!(slow[taps.len() - 2], data[0]);
         assert_eq!(slow[taps.len() - 1], data[3 + stride + 1]);

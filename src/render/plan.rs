@@ -7,8 +7,8 @@ use crate::raster::{Pixel, Raster};
 use rayon::prelude::*;
 
 /// Rows per parallel task, and columns per strip within it (see `render_into`).
-const BAND_ROWS: usize = 16;
-const STRIP_COLS: usize = 64;
+const BAND_ROWS: usize = 8;
+const STRIP_COLS: usize = 128;
 
 /// One output sample: the atlas texel at or before the sample position, and the fraction of a
 /// texel beyond it in x and y, in 1/65536 (far below any filter's visible precision).
