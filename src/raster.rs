@@ -15,21 +15,7 @@ pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 's
     /// Bilinear lookups for a run of taps into an image `stride` pixels wide; a tap that covers
     /// nothing gives the default (transparent) pixel. The hot loop of the renderer.
     fn bilinear_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
-        for (o, t) in out.iter_mut().zip(taps) {
-            *o = if t.idx == Tap::NONE.idx {
-                Self::default()
-            } else {
-                let i = t.idx as usize;
-                Self::bilinear(
-                    data[i],
-                    data[i + 1],
-                    data[i + stride],
-                    data[i + stride + 1],
-                    t.fx,
-                    t.fy,
-                )
-            };
-        }
+        bilinear_span_portable(data, stride, taps, out);
     }
 }
 
@@ -70,6 +56,30 @@ impl Pixel for [f32; 4] {
             let bottom = c[k] + (d[k] - c[k]) * wx;
             top + (bottom - top) * wy
         })
+    }
+}
+
+/// [`Pixel::bilinear_span`] through [`Pixel::bilinear`], one tap at a time.
+pub(crate) fn bilinear_span_portable<T: Pixel>(
+    data: &[T],
+    stride: usize,
+    taps: &[Tap],
+    out: &mut [T],
+) {
+    for (o, t) in out.iter_mut().zip(taps) {
+        *o = if t.idx == Tap::NONE.idx {
+            T::default()
+        } else {
+            let i = t.idx as usize;
+            T::bilinear(
+                data[i],
+                data[i + 1],
+                data[i + stride],
+                data[i + stride + 1],
+                t.fx,
+                t.fy,
+            )
+        };
     }
 }
 

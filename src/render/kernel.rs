@@ -58,21 +58,7 @@ pub(crate) fn bilinear_span_rgba8(
 }
 
 fn span_portable(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[u8; 4]]) {
-    for (o, t) in out.iter_mut().zip(taps) {
-        *o = if t.idx == Tap::NONE.idx {
-            [0; 4]
-        } else {
-            let i = t.idx as usize;
-            bilinear_rgba8(
-                data[i],
-                data[i + 1],
-                data[i + stride],
-                data[i + stride + 1],
-                t.fx,
-                t.fy,
-            )
-        };
-    }
+    crate::raster::bilinear_span_portable(data, stride, taps, out);
 }
 
 #[cfg(target_arch = "x86_64")]
