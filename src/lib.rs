@@ -8,6 +8,7 @@ pub mod content;
 pub mod cubemap;
 pub mod error;
 pub mod image_io;
+pub mod lens;
 pub mod normalmap;
 pub mod projection;
 pub mod raster;

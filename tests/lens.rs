@@ -1,0 +1,317 @@
+//! Lens models against OpenCV itself (fixtures from calibration/oracles/, made by OpenCV
+//! 4.14 through opencv-python-headless): projection, Jacobians, unprojection, round trips, and
+//! the places where OpenCV's own inverse fails and ours does not.
+
+mod common;
+
+use glam::DVec3;
+use omniwarp::lens::{Lens, LensModel};
+use serde::Deserialize;
+
+#[derive(Deserialize)]
+struct Case {
+    model: String,
+    intrinsics: Vec<f64>,
+    points: Vec<[f64; 3]>,
+    pixels: Vec<[f64; 2]>,
+    dq_dintrinsics: Vec<[Vec<f64>; 2]>,
+    unproject_pixels: Vec<[f64; 2]>,
+    unproject_rays: Vec<[f64; 3]>,
+    #[serde(default)]
+    opencv_theta_d_clamped_point_indices: Vec<usize>,
+}
+
+#[derive(Deserialize)]
+struct Fixtures {
+    opencv: String,
+    cases: Vec<Case>,
+}
+
+fn fixtures() -> Fixtures {
+    let text = std::fs::read_to_string(common::fixture("lens/opencv.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// The angle between two directions, accurate for tiny angles too (acos is not).
+fn angle(a: DVec3, b: DVec3) -> f64 {
+    a.cross(b).length().atan2(a.dot(b))
+}
+
+fn lens(c: &Case) -> Lens {
+    Lens::new(c.model.parse().unwrap(), c.intrinsics.clone()).unwrap()
+}
+
+#[test]
+fn projection_equals_opencv() {
+    let f = fixtures();
+    for c in &f.cases {
+        let l = lens(c);
+        let mut worst: f64 = 0.0;
+        for (p, q) in c.points.iter().zip(&c.pixels) {
+            let ours = l
+                .project(DVec3::from_array(*p))
+                .unwrap_or_else(|e| panic!("{}: {p:?}: {e}", c.model));
+            worst = worst.max((ours[0] - q[0]).hypot(ours[1] - q[1]));
+        }
+        println!(
+            "{} vs OpenCV {}: largest pixel difference {worst:.2e} px over {} points",
+            c.model,
+            f.opencv,
+            c.points.len()
+        );
+        assert!(worst < 1e-7, "{}: {worst} px", c.model);
+        assert!(
+            c.points.len() > 100,
+            "{}: only {} points",
+            c.model,
+            c.points.len()
+        );
+    }
+}
+
+#[test]
+fn intrinsics_jacobian_equals_opencv_and_point_jacobian_equals_finite_differences() {
+    for c in &fixtures().cases {
+        let l = lens(c);
+        let mut worst_i: f64 = 0.0;
+        let mut worst_p: f64 = 0.0;
+        for (p, jac) in c.points.iter().zip(&c.dq_dintrinsics) {
+            let p = DVec3::from_array(*p);
+            let got = l.project_with_jacobians(p).unwrap();
+            for (ours, theirs) in got.dq_dintrinsics.iter().zip(jac) {
+                for (o, want) in ours.iter().zip(theirs) {
+                    worst_i = worst_i.max((o - want).abs() / want.abs().max(1.0));
+                }
+            }
+            let h = 1e-6 * p.length();
+            for axis in 0..3 {
+                let mut e = DVec3::ZERO;
+                e[axis] = h;
+                let (a, b) = (l.project(p + e).unwrap(), l.project(p - e).unwrap());
+                for row in 0..2 {
+                    let fd = (a[row] - b[row]) / (2.0 * h);
+                    let d = (got.dq_dp[row][axis] - fd).abs() / fd.abs().max(1.0);
+                    worst_p = worst_p.max(d);
+                }
+            }
+        }
+        println!(
+            "{}: ∂q/∂intrinsics vs OpenCV {worst_i:.1e}, ∂q/∂p vs finite differences {worst_p:.1e}",
+            c.model
+        );
+        assert!(
+            worst_i < 1e-8,
+            "{}: intrinsics Jacobian off by {worst_i}",
+            c.model
+        );
+        assert!(
+            worst_p < 1e-5,
+            "{}: point Jacobian off by {worst_p}",
+            c.model
+        );
+    }
+}
+
+#[test]
+fn unprojection_equals_opencv_where_opencv_is_right() {
+    for c in &fixtures().cases {
+        let l = lens(c);
+        let mut worst: f64 = 0.0;
+        for (n, (q, ray)) in c.unproject_pixels.iter().zip(&c.unproject_rays).enumerate() {
+            if c.opencv_theta_d_clamped_point_indices.contains(&n) {
+                continue;
+            }
+            let ours = l
+                .unproject(*q)
+                .unwrap_or_else(|e| panic!("{} pixel {q:?}: {e}", c.model));
+            worst = worst.max(angle(ours, DVec3::from_array(*ray)));
+        }
+        println!(
+            "{}: largest angle to OpenCV's accurate inverse {worst:.1e} rad",
+            c.model
+        );
+        assert!(worst < 1e-9, "{}: {worst} rad", c.model);
+    }
+}
+
+/// LENS-MODELS.md §3.3: OpenCV 4.x clamps the fisheye's distorted radius to π/2, so beyond it
+/// its inverse returns a wrong (mirrored) point. Ours recovers the true ray there.
+#[test]
+fn fisheye_beyond_opencvs_clamp_still_unprojects() {
+    let mut checked = 0;
+    for c in fixtures()
+        .cases
+        .iter()
+        .filter(|c| !c.opencv_theta_d_clamped_point_indices.is_empty())
+    {
+        let l = lens(c);
+        for &n in &c.opencv_theta_d_clamped_point_indices {
+            let truth = DVec3::from_array(c.points[n]).normalize();
+            let ours = l.unproject(c.pixels[n]).unwrap();
+            let theirs = DVec3::from_array(c.unproject_rays[n]);
+            assert!(
+                angle(ours, truth) < 1e-9,
+                "{}: {}",
+                c.model,
+                angle(ours, truth)
+            );
+            assert!(
+                angle(theirs, truth) > 1e-3,
+                "OpenCV was right after all at {n}"
+            );
+            checked += 1;
+        }
+    }
+    println!("{checked} fisheye pixels beyond OpenCV's θ_d clamp recovered");
+    assert!(
+        checked > 10,
+        "the fixtures hold only {checked} clamped points"
+    );
+}
+
+#[test]
+fn project_of_unproject_is_identity_across_each_image() {
+    for c in &fixtures().cases {
+        let l = lens(c);
+        let mut worst: f64 = 0.0;
+        let mut n = 0;
+        // Over the image, taken as twice the principal point.
+        let (w, h) = (2.0 * c.intrinsics[2], 2.0 * c.intrinsics[3]);
+        for j in 0..=20 {
+            for i in 0..=30 {
+                let q = [i as f64 * w / 30.0, j as f64 * h / 20.0];
+                let Ok(ray) = l.unproject(q) else { continue };
+                let back = l.project(ray).unwrap();
+                worst = worst.max((back[0] - q[0]).hypot(back[1] - q[1]));
+                n += 1;
+            }
+        }
+        assert!(
+            n > 300 && worst < 1e-8,
+            "{}: {n} pixels, worst {worst} px",
+            c.model
+        );
+    }
+}
+
+#[test]
+fn closed_form_models_round_trip_and_reach_behind() {
+    for (name, behind) in [
+        ("LENSMODEL_PINHOLE", false),
+        ("LENSMODEL_STEREOGRAPHIC", true),
+        ("LENSMODEL_LONLAT", true),
+        ("LENSMODEL_LATLON", true),
+    ] {
+        let m: LensModel = name.parse().unwrap();
+        assert_eq!(m.meta().can_project_behind_camera, behind);
+        let l = Lens::new(m, vec![800.0, 790.0, 959.5, 539.5]).unwrap();
+        for p in [
+            DVec3::new(0.3, -0.2, 1.0),
+            DVec3::new(-2.0, 0.5, 0.4),
+            DVec3::new(0.4, 0.1, -1.0),
+        ] {
+            match l.project(p) {
+                Ok(q) => {
+                    let ray = l.unproject(q).unwrap();
+                    assert!(angle(ray, p) < 1e-12, "{name} {p}: {}", angle(ray, p));
+                    let j = l.project_with_jacobians(p).unwrap();
+                    let h = 1e-6;
+                    let fd = (l.project(p + DVec3::X * h).unwrap()[0]
+                        - l.project(p - DVec3::X * h).unwrap()[0])
+                        / (2.0 * h);
+                    assert!(
+                        (j.dq_dp[0][0] - fd).abs() < 1e-4 * fd.abs().max(1.0),
+                        "{name}"
+                    );
+                }
+                Err(e) => assert!(!behind && p.z <= 0.0, "{name} {p}: {e}"),
+            }
+        }
+    }
+}
+
+#[test]
+fn model_strings_round_trip_and_bad_ones_say_why() {
+    for s in [
+        "LENSMODEL_PINHOLE",
+        "LENSMODEL_OPENCV4",
+        "LENSMODEL_OPENCV5",
+        "LENSMODEL_OPENCV8",
+        "LENSMODEL_OPENCV12",
+        "LENSMODEL_OPENCV14",
+        "LENSMODEL_OPENCV_FISHEYE",
+        "LENSMODEL_STEREOGRAPHIC",
+        "LENSMODEL_LONLAT",
+        "LENSMODEL_LATLON",
+        "LENSMODEL_CAHVOR",
+        "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=120",
+    ] {
+        let m: LensModel = s.parse().unwrap();
+        assert_eq!(m.to_string(), s);
+    }
+    let splined: LensModel = "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=120"
+        .parse()
+        .unwrap();
+    assert_eq!(splined.intrinsics_len(), 4 + 2 * 16 * 12);
+    for (bad, why) in [
+        ("PINHOLE", "starts with"),
+        ("LENSMODEL_OPENCV6", "unknown"),
+        (
+            "LENSMODEL_SPLINED_STEREOGRAPHIC_order=4_Nx=16_Ny=12_fov_x_deg=120",
+            "order",
+        ),
+        (
+            "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12",
+            "expected",
+        ),
+    ] {
+        let e = bad.parse::<LensModel>().unwrap_err().to_string();
+        assert!(e.contains("`model`") && e.contains(why), "{bad}: {e}");
+    }
+    let e = Lens::new(LensModel::OpenCv(5), vec![1.0; 8])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("takes 9 intrinsics") && e.contains("k3"), "{e}");
+    let e = Lens::new(LensModel::Pinhole, vec![0.0, 1.0, 0.0, 0.0])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("fx"), "{e}");
+    let e = Lens::new(LensModel::Pinhole, vec![1.0, f64::NAN, 0.0, 0.0])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("fy must be finite"), "{e}");
+    let e = Lens::new(LensModel::Cahvor, vec![1.0; 9])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not computed"), "{e}");
+}
+
+#[test]
+fn points_without_a_pixel_are_refused_not_mirrored() {
+    let l = Lens::new(
+        LensModel::OpenCv(4),
+        vec![1000.0, 1000.0, 960.0, 540.0, -0.3, 0.0, 0.0, 0.0],
+    )
+    .unwrap();
+    assert!(l.fold_radius().is_finite());
+    assert!(
+        l.project(DVec3::new(0.1, 0.2, -1.0)).is_err(),
+        "OpenCV would show the antipode"
+    );
+    assert!(
+        l.project(DVec3::new(l.fold_radius() * 1.01, 0.0, 1.0))
+            .is_err()
+    );
+    assert!(
+        l.project(DVec3::new(l.fold_radius() * 0.99, 0.0, 1.0))
+            .is_ok()
+    );
+    let fish = Lens::new(
+        LensModel::OpenCvFisheye,
+        vec![600.0, 600.0, 959.5, 959.5, 0.02, -0.01, 0.002, -0.0005],
+    )
+    .unwrap();
+    assert!(fish.project(DVec3::new(1.0, 0.0, 0.0)).is_err());
+    assert!(fish.unproject([5000.0, 959.5]).is_err());
+    assert!(fish.unproject([f64::NAN, 0.0]).is_err());
+}
