@@ -46,6 +46,9 @@ enum Command {
     /// Projection tile screens: sample, rasterise, chart their accuracy.
     #[command(subcommand)]
     Tiles(crate::tiles_cmd::TilesCommand),
+    /// Lens models: project points and unproject pixels in batches (JSON).
+    #[command(subcommand)]
+    Lens(crate::lens_cmd::LensCommand),
 }
 
 #[derive(Args, Clone)]
@@ -369,6 +372,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Bench(a) => crate::bench::run(a),
         Command::Tiles(t) => crate::tiles_cmd::run(t),
+        Command::Lens(l) => crate::lens_cmd::run(l),
     }
 }
 

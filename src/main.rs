@@ -2,6 +2,7 @@
 
 mod bench;
 mod cli;
+mod lens_cmd;
 mod tiles_cmd;
 
 use clap::Parser;

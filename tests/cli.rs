@@ -565,3 +565,128 @@ fn tile_screens_from_the_command_line() {
         );
     }
 }
+
+#[test]
+fn lens_project_and_unproject_from_the_command_line() {
+    let s = Scene::new();
+    std::fs::write(
+        s.path("pts.json"),
+        "[[0.1, 0.2, 1.0], [0, 0, -1], [0.5, -0.3, 2.0]]",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .current_dir(s.dir.path())
+        .args([
+            "lens",
+            "project",
+            "--model",
+            "LENSMODEL_OPENCV5",
+            "--intrinsics",
+            "1500,1500,959.5,539.5,-0.2,0.05,0.001,-0.001,0.01",
+            "--points",
+            "pts.json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let q: Vec<Option<[f64; 2]>> = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(q.len(), 3);
+    assert!(q[1].is_none(), "a point behind the camera has no pixel");
+    std::fs::write(
+        s.path("px.json"),
+        serde_json::to_string(&[q[0].unwrap(), q[2].unwrap()]).unwrap(),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .current_dir(s.dir.path())
+        .args([
+            "lens",
+            "unproject",
+            "--model",
+            "LENSMODEL_OPENCV5",
+            "--intrinsics",
+            "1500,1500,959.5,539.5,-0.2,0.05,0.001,-0.001,0.01",
+            "--pixels",
+            "px.json",
+        ])
+        .output()
+        .unwrap();
+    let rays: Vec<Option<[f64; 3]>> = serde_json::from_slice(&out.stdout).unwrap();
+    let want = glam::DVec3::new(0.1, 0.2, 1.0).normalize();
+    let got = glam::DVec3::from_array(rays[0].unwrap());
+    assert!(got.cross(want).length() < 1e-12, "{got} vs {want}");
+    for (args, flag) in [
+        (
+            vec![
+                "lens",
+                "project",
+                "--model",
+                "LENSMODEL_OPENCV6",
+                "--intrinsics",
+                "1,1,0,0",
+                "--points",
+                "pts.json",
+            ],
+            "--model",
+        ),
+        (
+            vec![
+                "lens",
+                "project",
+                "--model",
+                "LENSMODEL_OPENCV4",
+                "--intrinsics",
+                "1,1,0,0",
+                "--points",
+                "pts.json",
+            ],
+            "--intrinsics",
+        ),
+        (
+            vec![
+                "lens",
+                "project",
+                "--model",
+                "LENSMODEL_PINHOLE",
+                "--intrinsics",
+                "1,1,zero,0",
+                "--points",
+                "pts.json",
+            ],
+            "--intrinsics",
+        ),
+        (
+            vec![
+                "lens",
+                "project",
+                "--model",
+                "LENSMODEL_PINHOLE",
+                "--intrinsics",
+                "1,1,0,0",
+                "--points",
+                "missing.json",
+            ],
+            "--points",
+        ),
+        (
+            vec![
+                "lens",
+                "unproject",
+                "--model",
+                "LENSMODEL_PINHOLE",
+                "--intrinsics",
+                "1,1,0,0",
+                "--pixels",
+                "pts.json",
+            ],
+            "--pixels",
+        ),
+    ] {
+        let (ok, err) = s.run(&args);
+        assert!(!ok && err.contains(flag), "{args:?}: {err}");
+    }
+}

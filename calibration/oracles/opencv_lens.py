@@ -115,6 +115,15 @@ def main():
     for k in ([0.02, -0.01, 0.002, -0.0005], [-0.03, 0.004, -0.001, 0.0002], [0.08, -0.02, 0.005, -0.001]):
         f = RNG.uniform(560, 640)
         cases.append(fisheye_case([f, f * RNG.uniform(0.99, 1.01), 959.5, 959.5], k))
+    # One lens written by OpenCV's own FileStorage, in both of its text formats.
+    first8 = next(c for c in cases if c["model"] == "LENSMODEL_OPENCV8")
+    i = first8["intrinsics"]
+    K = np.array([[i[0], 0, i[2]], [0, i[1], i[3]], [0, 0, 1.0]])
+    for ext in ("yml", "json"):
+        fs = cv2.FileStorage(f"{out}/opencv8_camera.{ext}", cv2.FILE_STORAGE_WRITE)
+        fs.write("cameraMatrix", K)
+        fs.write("distCoeffs", np.array(i[4:]).reshape(1, -1))
+        fs.release()
     with open(f"{out}/opencv.json", "w") as fh:
         json.dump({"opencv": cv2.__version__, "numpy": np.__version__, "cases": cases}, fh)
     print(f"wrote {len(cases)} cases with OpenCV {cv2.__version__}")

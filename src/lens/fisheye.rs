@@ -32,20 +32,22 @@ pub fn project<T: Real>(core: [T; 4], k: &[T], p: [T; 3]) -> [T; 2] {
     [fx * xd + cx, fy * yd + cy]
 }
 
-/// The angle θ ∈ [0, 90°) with θ_d(θ) = ρ, or `None` when no such angle exists on the rising
-/// part of θ_d.
-pub fn solve_theta(k: [f64; 4], rho: f64) -> Option<f64> {
+/// The end of the usable range of θ: 90°, or where θ_d stops rising if that comes first.
+pub fn theta_limit(k: [f64; 4]) -> f64 {
     let limit = std::f64::consts::FRAC_PI_2;
-    // The end of the usable range: 90°, or where θ_d stops rising if that comes first.
-    let mut hi = limit;
     let steps = 2000;
     for i in 1..=steps {
         let t = limit * i as f64 / steps as f64;
         if theta_d(k, t).1 <= 0.0 {
-            hi = limit * (i - 1) as f64 / steps as f64;
-            break;
+            return limit * (i - 1) as f64 / steps as f64;
         }
     }
+    limit
+}
+
+/// The angle θ ∈ [0, `hi`] with θ_d(θ) = ρ (`hi` from [`theta_limit`]), or `None` when there
+/// is none.
+pub fn solve_theta(k: [f64; 4], rho: f64, hi: f64) -> Option<f64> {
     if rho < 0.0 || rho > theta_d(k, hi).0 {
         return None;
     }

@@ -9,6 +9,7 @@
 //! hand-derived copy that could drift from it.
 
 mod central;
+pub mod files;
 mod fisheye;
 mod model;
 mod opencv;
@@ -35,7 +36,8 @@ pub struct Lens {
     model: LensModel,
     intrinsics: Vec<f64>,
     /// OpenCV pinhole models: the normalised radius up to which the radial distortion keeps
-    /// rising (beyond it two rays share a pixel); infinite where it never folds.
+    /// rising (beyond it two rays share a pixel); infinite where it never folds. The fisheye:
+    /// the largest usable angle from the axis.
     fold: f64,
 }
 
@@ -92,6 +94,9 @@ impl Lens {
         }
         let fold = match model {
             LensModel::OpenCv(_) => radial_fold(&intrinsics[4..]),
+            LensModel::OpenCvFisheye => {
+                fisheye::theta_limit([intrinsics[4], intrinsics[5], intrinsics[6], intrinsics[7]])
+            }
             _ => f64::INFINITY,
         };
         Ok(Lens {
@@ -109,10 +114,13 @@ impl Lens {
         &self.intrinsics
     }
 
-    /// Normalised radius (x/z) where an OpenCV model's radial distortion folds over; infinite
-    /// for every other model. Projection and unprojection stay inside it.
+    /// Normalised radius (x/z) where an OpenCV pinhole model's radial distortion folds over;
+    /// infinite for every other model. Projection and unprojection stay inside it.
     pub fn fold_radius(&self) -> f64 {
-        self.fold
+        match self.model {
+            LensModel::OpenCv(_) => self.fold,
+            _ => f64::INFINITY,
+        }
     }
 
     /// The formula, on any [`Real`].
@@ -243,7 +251,7 @@ impl Lens {
             LensModel::OpenCvFisheye => {
                 let k = [i[4], i[5], i[6], i[7]];
                 let rho = u.hypot(v);
-                let theta = fisheye::solve_theta(k, rho).ok_or(NoImage(
+                let theta = fisheye::solve_theta(k, rho, self.fold).ok_or(NoImage(
                     "the pixel lies beyond the fisheye's 90° or where its distortion turns back",
                 ))?;
                 if rho == 0.0 {
