@@ -22,7 +22,8 @@ pub enum LensCommand {
 #[derive(Args)]
 pub struct LensArgs {
     /// Lens model, mrcal's name: LENSMODEL_PINHOLE, LENSMODEL_OPENCV4/5/8/12/14,
-    /// LENSMODEL_OPENCV_FISHEYE, LENSMODEL_STEREOGRAPHIC, LENSMODEL_LONLAT, LENSMODEL_LATLON.
+    /// LENSMODEL_OPENCV_FISHEYE, LENSMODEL_STEREOGRAPHIC, LENSMODEL_LONLAT, LENSMODEL_LATLON,
+    /// LENSMODEL_CAHVOR, LENSMODEL_SPLINED_STEREOGRAPHIC_order=O_Nx=NX_Ny=NY_fov_x_deg=F.
     #[arg(long)]
     model: String,
     /// Intrinsics fx,fy,cx,cy,… in pixels (then the model's distortion terms).
@@ -116,7 +117,9 @@ pub fn run(cmd: LensCommand) -> Result<()> {
 fn bench() -> Result<()> {
     use rayon::prelude::*;
     use std::time::Instant;
-    let models: [(&str, Vec<f64>); 9] = [
+    let mut splined = vec![900.0, 905.0, 959.5, 539.5];
+    splined.extend((0..384).map(|i| 0.002 * ((i % 7) as f64 - 3.0)));
+    let models: [(&str, Vec<f64>); 11] = [
         ("LENSMODEL_PINHOLE", vec![1500.0, 1500.0, 959.5, 539.5]),
         (
             "LENSMODEL_OPENCV4",
@@ -146,13 +149,25 @@ fn bench() -> Result<()> {
         ("LENSMODEL_STEREOGRAPHIC", vec![800.0, 800.0, 959.5, 539.5]),
         ("LENSMODEL_LONLAT", vec![600.0, 600.0, 959.5, 539.5]),
         ("LENSMODEL_LATLON", vec![600.0, 600.0, 959.5, 539.5]),
+        (
+            "LENSMODEL_CAHVOR",
+            vec![
+                1200.0, 1190.0, 959.5, 539.5, 0.01, -0.02, -0.05, 0.02, -0.003,
+            ],
+        ),
+        (
+            "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=120",
+            splined,
+        ),
     ];
-    let n = 200_000;
+    let n = 100_000;
     println!("{n} points per model; points per second (millions)");
     println!(
         "{:<26} {:>10} {:>10} {:>10} {:>10}",
         "model", "proj 1T", "proj all", "unproj 1T", "unproj all"
     );
+    // The splined model's name carries its configuration; the table shows the family.
+    let short = |name: &str| name.split("_order").next().unwrap_or(name).to_string();
     for (name, intrinsics) in models {
         let lens = Lens::new(name.parse()?, intrinsics)?;
         // Pixels over the image, unprojected once to get points the model can take.
@@ -188,7 +203,10 @@ fn bench() -> Result<()> {
                 .count()
                 .max(1)
         });
-        println!("{name:<26} {p1:>10.2} {pn:>10.2} {u1:>10.2} {un:>10.2}");
+        println!(
+            "{:<26} {p1:>10.2} {pn:>10.2} {u1:>10.2} {un:>10.2}",
+            short(name)
+        );
     }
     Ok(())
 }

@@ -8,12 +8,14 @@
 //! to the intrinsics are exact derivatives of the very code that projects, not a second
 //! hand-derived copy that could drift from it.
 
+mod cahvor;
 mod central;
 pub mod files;
 mod fisheye;
 mod model;
 mod opencv;
 mod solve;
+mod splined;
 
 pub use model::{LensModel, Meta};
 
@@ -133,9 +135,25 @@ impl Lens {
             LensModel::Stereographic => central::stereographic(core, p),
             LensModel::LonLat => central::lonlat(core, p),
             LensModel::LatLon => central::latlon(core, p),
-            LensModel::Cahvor | LensModel::SplinedStereographic { .. } => {
-                unreachable!("Lens::new refuses unsupported models")
-            }
+            LensModel::Cahvor => cahvor::project(core, &intr[4..9], p),
+            LensModel::SplinedStereographic { .. } => splined::project(&self.splined(), intr, p),
+        }
+    }
+
+    fn splined(&self) -> splined::Config {
+        match self.model {
+            LensModel::SplinedStereographic {
+                order,
+                nx,
+                ny,
+                fov_x_deg,
+            } => splined::Config {
+                order,
+                nx: nx as usize,
+                ny: ny as usize,
+                fov_x_deg: f64::from(fov_x_deg),
+            },
+            _ => unreachable!("only the splined model has a spline"),
         }
     }
 
@@ -179,7 +197,17 @@ impl Lens {
                     ));
                 }
             }
-            LensModel::Cahvor | LensModel::SplinedStereographic { .. } => unreachable!(),
+            LensModel::Cahvor => {
+                let (omega, z) = cahvor::depths(&self.intrinsics[4..9], p.to_array());
+                if p.z <= 0.0 || omega <= 0.0 || z <= 0.0 {
+                    return Err(NoImage("the point is not in front of the CAHVOR lens"));
+                }
+            }
+            LensModel::SplinedStereographic { .. } => {
+                if p.x == 0.0 && p.y == 0.0 && p.z < 0.0 {
+                    return Err(NoImage("straight behind a stereographic lens has no pixel"));
+                }
+            }
         }
         Ok(())
     }
@@ -203,6 +231,9 @@ impl Lens {
     pub fn project_with_jacobians(&self, p: DVec3) -> std::result::Result<Projected, NoImage> {
         let q = self.project(p)?;
         let n = self.intrinsics.len();
+        if n + 3 > LANES {
+            return Ok(self.splined_jacobians(p, q));
+        }
         let lane = |v: f64, i: usize| Grad::from_re(v).derivative(i);
         let pd = [lane(p.x, 0), lane(p.y, 1), lane(p.z, 2)];
         let id: Vec<Grad> = self
@@ -218,6 +249,38 @@ impl Lens {
             dq_dp: grads.map(|g| [g[0], g[1], g[2]]),
             dq_dintrinsics: grads.map(|g| g[3..3 + n].to_vec()),
         })
+    }
+
+    /// The splined model has hundreds of intrinsics, but each pixel depends on the core and
+    /// (order + 1)² knots only: the core and the point by dual numbers, the knots directly
+    /// (q = f·(u + Σ w·C) + c is linear in them, ∂q/∂C = f·w).
+    fn splined_jacobians(&self, p: DVec3, q: [f64; 2]) -> Projected {
+        let cfg = self.splined();
+        let lane = |v: f64, i: usize| Grad::from_re(v).derivative(i);
+        let pd = [lane(p.x, 0), lane(p.y, 1), lane(p.z, 2)];
+        let mut intr: Vec<Grad> = self.intrinsics.iter().map(|&v| Grad::from_re(v)).collect();
+        for (i, v) in intr.iter_mut().take(4).enumerate() {
+            *v = lane(self.intrinsics[i], 3 + i);
+        }
+        let out = splined::project(&cfg, &intr, pd);
+        let grads = out.map(|o| gradient(&o.eps));
+        let mut di = [
+            vec![0.0; self.intrinsics.len()],
+            vec![0.0; self.intrinsics.len()],
+        ];
+        for (row, g) in di.iter_mut().zip(&grads) {
+            row[..4].copy_from_slice(&g[3..7]);
+        }
+        let u = splined::stereographic_u(p.to_array());
+        for (at, w) in cfg.weights(u) {
+            di[0][at] = self.intrinsics[0] * w;
+            di[1][at + 1] = self.intrinsics[1] * w;
+        }
+        Projected {
+            q,
+            dq_dp: grads.map(|g| [g[0], g[1], g[2]]),
+            dq_dintrinsics: di,
+        }
     }
 
     /// The unit ray of pixel `q` (pixel centres at integers).
@@ -261,8 +324,9 @@ impl Lens {
                     DVec3::new(u * s, v * s, theta.cos())
                 }
             }
-            LensModel::OpenCv(_) => solve::unproject(self, q)?,
-            LensModel::Cahvor | LensModel::SplinedStereographic { .. } => unreachable!(),
+            LensModel::OpenCv(_) | LensModel::Cahvor | LensModel::SplinedStereographic { .. } => {
+                solve::unproject(self, q)?
+            }
         };
         Ok(ray)
     }

@@ -35,8 +35,7 @@ pub struct Meta {
     pub can_project_behind_camera: bool,
     /// Unprojection is a formula, not an iteration.
     pub has_closed_form_inverse: bool,
-    /// omniwarp computes this model (CAHVOR and the splined family parse but are not yet
-    /// computed).
+    /// omniwarp computes this model (every model it can name, today).
     pub supported: bool,
 }
 
@@ -64,8 +63,8 @@ impl LensModel {
             LensModel::Pinhole => (false, true, true),
             LensModel::OpenCv(_) | LensModel::OpenCvFisheye => (false, false, true),
             LensModel::Stereographic | LensModel::LonLat | LensModel::LatLon => (true, true, true),
-            LensModel::Cahvor => (false, false, false),
-            LensModel::SplinedStereographic { .. } => (true, false, false),
+            LensModel::Cahvor => (false, false, true),
+            LensModel::SplinedStereographic { .. } => (true, false, true),
         };
         Meta {
             can_project_behind_camera: behind,

@@ -3,6 +3,7 @@
 //! the undistorted pinhole ray, and Levenberg–Marquardt drives the pixel residual of the
 //! model's own projection to zero using its exact 2×2 Jacobian. It stops at a residual below
 //! 1e-10 px; a pixel it cannot bring below 1e-8 px is refused, never answered with a wrong ray.
+//! Rays behind the lens are searched only for models that can image them.
 
 use super::{Lens, NoImage};
 use glam::DVec3;
@@ -24,7 +25,8 @@ pub fn unproject(lens: &Lens, q: [f64; 2]) -> Result<DVec3, NoImage> {
     // Residual and Jacobian at w; None where the ray is not in front of the lens.
     let eval = |w: [f64; 2]| -> Option<([f64; 2], [[f64; 2]; 2])> {
         let r = ray(w);
-        if r[2] <= 0.0 || r[0].hypot(r[1]) / r[2] > lens.fold_radius() {
+        let behind = r[2] <= 0.0 && !lens.model().meta().can_project_behind_camera;
+        if behind || (r[2] > 0.0 && r[0].hypot(r[1]) / r[2] > lens.fold_radius()) {
             return None;
         }
         let wd = [
