@@ -64,7 +64,11 @@ def pinhole_case(n, core, d):
     # Columns: rvec(3), tvec(3), fx, fy, cx, cy, distortion…
     jac = jac.reshape(len(pts), 2, -1)[:, :, 6:]
     name = f"LENSMODEL_OPENCV{n}"
+    # OpenCV's default inverse (5 plain fixed-point iterations), recorded to show where it is off.
+    default = cv2.undistortPoints(px[good].reshape(-1, 1, 2), K, D).reshape(-1, 2)
+    default_rays = np.column_stack([default, np.ones(len(default))])
     return {
+        "undistortPoints_default_rays": (default_rays / np.linalg.norm(default_rays, axis=1, keepdims=True)).tolist(),
         "model": name,
         "intrinsics": list(core) + list(d),
         "fold_radius": fold if np.isfinite(fold) else None,
