@@ -578,3 +578,87 @@ fn opencvs_default_inverse_is_off_where_ours_is_not() {
         "{worst_default} {worst_ours}"
     );
 }
+
+/// Against mrcal 2.5 itself (calibration/oracles/mrcal_lens.py).
+mod against_mrcal {
+    use super::*;
+
+    #[derive(Deserialize)]
+    struct MCase {
+        model: String,
+        intrinsics: Vec<f64>,
+        points: Vec<[f64; 3]>,
+        pixels: Vec<[f64; 2]>,
+        dq_dp: Vec<[[f64; 3]; 2]>,
+        dq_dintrinsics: Vec<[Vec<f64>; 2]>,
+        unproject_rays: Vec<[f64; 3]>,
+        unreliable_inverse_point_indices: Vec<usize>,
+    }
+
+    #[derive(Deserialize)]
+    struct MFixtures {
+        cases: Vec<MCase>,
+    }
+
+    fn cases() -> Vec<MCase> {
+        let text = std::fs::read_to_string(common::fixture("lens/mrcal.json")).unwrap();
+        serde_json::from_str::<MFixtures>(&text).unwrap().cases
+    }
+
+    #[test]
+    fn every_mrcal_model_projects_differentiates_and_unprojects_as_mrcal_does() {
+        let mut seen = std::collections::BTreeSet::new();
+        for c in cases() {
+            let model: LensModel = c.model.parse().unwrap();
+            let l = Lens::new(model, c.intrinsics.clone()).unwrap();
+            let (mut wq, mut wj, mut wu) = (0.0f64, 0.0f64, 0.0f64);
+            let mut compared = 0;
+            for (n, p) in c.points.iter().enumerate() {
+                let p = DVec3::from_array(*p);
+                let got = l
+                    .project_with_jacobians(p)
+                    .unwrap_or_else(|e| panic!("{}: {p}: {e}", c.model));
+                let q = c.pixels[n];
+                wq = wq.max((got.q[0] - q[0]).hypot(got.q[1] - q[1]));
+                for row in 0..2 {
+                    for (a, b) in got.dq_dp[row].iter().zip(&c.dq_dp[n][row]) {
+                        wj = wj.max((a - b).abs() / b.abs().max(1.0));
+                    }
+                    for (a, b) in got.dq_dintrinsics[row]
+                        .iter()
+                        .zip(&c.dq_dintrinsics[n][row])
+                    {
+                        wj = wj.max((a - b).abs() / b.abs().max(1.0));
+                    }
+                }
+                if !c.unreliable_inverse_point_indices.contains(&n) {
+                    let ours = l
+                        .unproject(q)
+                        .unwrap_or_else(|e| panic!("{} {q:?}: {e}", c.model));
+                    wu = wu.max(angle(ours, DVec3::from_array(c.unproject_rays[n])));
+                    compared += 1;
+                }
+            }
+            let closed = model.meta().has_closed_form_inverse;
+            println!(
+                "{}: pixels {wq:.1e} px, Jacobians {wj:.1e} (relative), unprojection {wu:.1e} rad over {compared} of {} points",
+                c.model,
+                c.points.len()
+            );
+            assert!(wq < 1e-7, "{}: {wq} px", c.model);
+            assert!(wj < 1e-7, "{}: Jacobians off by {wj}", c.model);
+            assert!(
+                wu < if closed { 1e-10 } else { 1e-8 },
+                "{}: {wu} rad",
+                c.model
+            );
+            assert!(
+                compared * 10 > c.points.len() * 9,
+                "{}: mrcal's inverse was unreliable too often",
+                c.model
+            );
+            seen.insert(c.model.split("_order").next().unwrap().to_string());
+        }
+        assert_eq!(seen.len(), 10, "{seen:?}");
+    }
+}
