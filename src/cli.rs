@@ -49,6 +49,16 @@ enum Command {
     /// Lens models: project points and unproject pixels in batches (JSON).
     #[command(subcommand)]
     Lens(crate::lens_cmd::LensCommand),
+    /// A rig channel's warp map (EXR): which content direction each projector pixel shows.
+    Warp(crate::rig_cmd::WarpArgs),
+    /// Edge-blend masks for every channel of a rig (16-bit PNG, gamma-encoded).
+    Blend(crate::rig_cmd::BlendArgs),
+    /// Time warp generation (3840×2160 on every surface type) and the dome example's blends.
+    WarpBench {
+        /// The rig whose blends are timed.
+        #[arg(long, default_value = "calibration/rigs/dome-180-tilt15-5proj.json")]
+        rig: PathBuf,
+    },
 }
 
 #[derive(Args, Clone)]
@@ -210,6 +220,16 @@ struct RenderArgs {
     /// saturation (seed 000, Figure 5).
     #[arg(long, conflicts_with_all = ["projection", "normal_map"])]
     tiles: Option<PathBuf>,
+    /// Render a rig channel's projector image instead (with --channel): its own warp, its
+    /// blend mask applied in signal space.
+    #[arg(long, requires = "channel", conflicts_with_all = ["projection", "normal_map", "tiles"])]
+    rig: Option<PathBuf>,
+    /// The rig channel to render.
+    #[arg(long, requires = "rig")]
+    channel: Option<String>,
+    /// Projector gamma for the blend mask (with --rig).
+    #[arg(long, default_value_t = 2.2)]
+    gamma: f64,
     /// Texture filter.
     #[arg(long, value_enum, default_value = "bilinear")]
     filter: FilterArg,
@@ -373,6 +393,9 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(a) => crate::bench::run(a),
         Command::Tiles(t) => crate::tiles_cmd::run(t),
         Command::Lens(l) => crate::lens_cmd::run(l),
+        Command::Warp(a) => crate::rig_cmd::warp(a),
+        Command::Blend(a) => crate::rig_cmd::blend(a),
+        Command::WarpBench { rig } => crate::rig_cmd::bench(&rig),
     }
 }
 
@@ -466,12 +489,20 @@ enum AnyRaster {
 
 fn render_cmd(a: RenderArgs) -> Result<()> {
     check_ext(&a.out, &["png", "exr"])?;
-    let map = a
-        .normal_map
-        .as_deref()
-        .map(NormalMap::read)
-        .transpose()
-        .context("--normal-map")?;
+    let mut mask = None;
+    let map = match (&a.rig, &a.channel) {
+        (Some(rig), Some(id)) => {
+            let (m, k) = crate::rig_cmd::render_inputs(rig, id, a.gamma)?;
+            mask = Some(k);
+            Some(m)
+        }
+        _ => a
+            .normal_map
+            .as_deref()
+            .map(NormalMap::read)
+            .transpose()
+            .context("--normal-map")?,
+    };
     let (w, h) = match (a.size, &map) {
         (Some(s), _) => s,
         (None, Some(m)) => (m.width() as u32, m.height() as u32),
@@ -493,11 +524,23 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
     let content = load_content(&a.content, image_io_is_exr(&a.out))?;
     let (ss, f) = (a.supersample, filter(a.filter));
     let effect = features.as_ref().map(|f| f.f());
+    let scale = |img: &mut [f32; 4], m: f32| {
+        for c in &mut img[..3] {
+            *c *= m;
+        }
+    };
     let img = match &content {
         AnyContent::U8(c) => {
             let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
             if let Some(e) = &effect {
                 saturation(&mut r, e);
+            }
+            if let Some(m) = &mask {
+                for (p, &k) in r.data.iter_mut().zip(m) {
+                    let mut v = p.to_f32();
+                    scale(&mut v, k);
+                    *p = <[u8; 4]>::from_f32(v);
+                }
             }
             AnyRaster::U8(r)
         }
@@ -505,6 +548,11 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
             let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
             if let Some(e) = &effect {
                 saturation(&mut r, e);
+            }
+            if let Some(m) = &mask {
+                for (p, &k) in r.data.iter_mut().zip(m) {
+                    scale(p, k);
+                }
             }
             AnyRaster::F32(r)
         }

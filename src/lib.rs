@@ -13,6 +13,8 @@ pub mod normalmap;
 pub mod projection;
 pub mod raster;
 pub mod render;
+pub mod rig;
+pub mod surface;
 pub mod tiles;
 
 pub use error::{Error, Outside, Result};

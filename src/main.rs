@@ -3,6 +3,7 @@
 mod bench;
 mod cli;
 mod lens_cmd;
+mod rig_cmd;
 mod tiles_cmd;
 
 use clap::Parser;

@@ -690,3 +690,109 @@ fn lens_project_and_unproject_from_the_command_line() {
         assert!(!ok && err.contains(flag), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn rig_warp_blend_and_render_from_the_command_line() {
+    let s = Scene::new();
+    let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/flat-2proj.json");
+    let rig = rig.to_str().unwrap();
+    let (ok, err) = s.run(&[
+        "warp",
+        "--rig",
+        rig,
+        "--channel",
+        "left",
+        "--out",
+        "left.exr",
+        "--wall",
+        "left-wall.exr",
+    ]);
+    assert!(ok, "{err}");
+    let map = omniwarp::normalmap::NormalMap::read(&s.path("left.exr")).unwrap();
+    assert_eq!((map.width(), map.height()), (1920, 1080));
+    assert!(
+        map.attributes
+            .iter()
+            .any(|(k, v)| k == "omniwarp.channel" && v == "left")
+    );
+    let (ok, err) = s.run(&["blend", "--rig", rig, "--out-dir", "blend"]);
+    assert!(ok, "{err}");
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(s.path("blend/right.png")).unwrap(),
+    ));
+    let reader = decoder.read_info().unwrap();
+    let info = reader.info();
+    assert_eq!(
+        (info.width, info.height, info.bit_depth),
+        (1920, 1080, png::BitDepth::Sixteen)
+    );
+    assert!(
+        info.uncompressed_latin1_text
+            .iter()
+            .any(|t| t.keyword == "omniwarp.blend_gamma" && t.text == "2.2")
+    );
+    let (ok, err) = s.run(&[
+        "render",
+        "--rig",
+        rig,
+        "--channel",
+        "right",
+        "--content",
+        "eq.png",
+        "--content-format",
+        "equirect",
+        "--out",
+        "right.png",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        image::image_dimensions(s.path("right.png")).unwrap(),
+        (1920, 1080)
+    );
+    for (args, flag) in [
+        (
+            vec![
+                "warp",
+                "--rig",
+                rig,
+                "--channel",
+                "middle",
+                "--out",
+                "bad.exr",
+            ],
+            "--channel",
+        ),
+        (
+            vec![
+                "warp",
+                "--rig",
+                "missing.json",
+                "--channel",
+                "left",
+                "--out",
+                "bad.exr",
+            ],
+            "--rig",
+        ),
+        (
+            vec![
+                "warp",
+                "--rig",
+                rig,
+                "--channel",
+                "left",
+                "--out",
+                "bad.png",
+            ],
+            "--out",
+        ),
+        (
+            vec!["blend", "--rig", rig, "--out-dir", "b2", "--gamma", "0"],
+            "--gamma",
+        ),
+    ] {
+        let (ok, err) = s.run(&args);
+        assert!(!ok && err.contains(flag), "{args:?}: {err}");
+        assert!(!s.path("bad.exr").exists() && !s.path("bad.png").exists());
+    }
+}

@@ -285,6 +285,16 @@ impl Lens {
 
     /// The unit ray of pixel `q` (pixel centres at integers).
     pub fn unproject(&self, q: [f64; 2]) -> std::result::Result<DVec3, NoImage> {
+        self.unproject_near(q, None)
+    }
+
+    /// [`Lens::unproject`] started from `guess`, a ray close to the answer (a neighbouring
+    /// pixel's): iterative models then converge in a step or two. The answer is the same.
+    pub fn unproject_near(
+        &self,
+        q: [f64; 2],
+        guess: Option<DVec3>,
+    ) -> std::result::Result<DVec3, NoImage> {
         if !q.iter().all(|v| v.is_finite()) {
             return Err(NoImage("the pixel is not finite"));
         }
@@ -325,7 +335,7 @@ impl Lens {
                 }
             }
             LensModel::OpenCv(_) | LensModel::Cahvor | LensModel::SplinedStereographic { .. } => {
-                solve::unproject(self, q)?
+                solve::unproject(self, q, guess)?
             }
         };
         Ok(ray)

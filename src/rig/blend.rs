@@ -1,0 +1,139 @@
+//! Edge blending. For each projector pixel that lights the wall at P, every other projector
+//! that also lights P (P projects inside its image and its own ray reaches the wall there, not
+//! something in front) contributes. Each projector's raw weight is a smoothstep of its pixel's
+//! distance to its nearest image edge (over half the image's shorter side), so it falls to zero
+//! at its edge; the weights are normalised to sum to one at every wall point.
+//!
+//! The stored mask is in signal space: m = w^(1/γ) with γ = 2.2 by default, so that a media
+//! server multiplying the video signal by m yields w in light on a projector with that gamma.
+//! The PNG is 16-bit grey with the gamma in a text chunk (`omniwarp.blend_gamma`).
+
+use super::{Channel, Rig};
+use crate::error::{Error, Result};
+use crate::image_io::atomic_write;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::path::Path;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlendOptions {
+    pub gamma: f64,
+}
+
+impl Default for BlendOptions {
+    fn default() -> Self {
+        BlendOptions { gamma: 2.2 }
+    }
+}
+
+fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
+/// Raw weight of channel `ch` at its pixel q: 0 at the image edge, 1 half a short side inside.
+fn edge_weight(ch: &Channel, q: [f64; 2]) -> f64 {
+    let (w, h) = (f64::from(ch.width), f64::from(ch.height));
+    let d = (q[0] + 0.5)
+        .min(w - 0.5 - q[0])
+        .min(q[1] + 0.5)
+        .min(h - 0.5 - q[1]);
+    smoothstep(d / (0.5 * w.min(h)))
+}
+
+impl Rig {
+    /// Channel `ch`'s pixel showing wall point `p`, if `ch` lights it.
+    pub fn pixel_lighting(&self, ch: &Channel, p: DVec3) -> Option<[f64; 2]> {
+        let local = ch.rotation.transpose() * (p - ch.position);
+        let q = ch.lens.project(local).ok()?;
+        let inside = q[0] >= -0.5
+            && q[0] <= f64::from(ch.width) - 0.5
+            && q[1] >= -0.5
+            && q[1] <= f64::from(ch.height) - 0.5;
+        if !inside {
+            return None;
+        }
+        // Its own ray must reach the wall at p, not stop at another part of the wall first.
+        let dir = (p - ch.position).normalize();
+        let hit = self.doc.screen.intersect(ch.position, dir).point()?;
+        (hit.distance(p) <= 1e-6 * (1.0 + p.distance(ch.position))).then_some(q)
+    }
+
+    /// Every channel lighting wall point `p`, with its blend weight (linear light; they sum to
+    /// one).
+    pub fn weights_at(&self, p: DVec3) -> Vec<(usize, f64)> {
+        let raw: Vec<(usize, f64)> = self
+            .channels
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| self.pixel_lighting(c, p).map(|q| (i, edge_weight(c, q))))
+            .collect();
+        let total: f64 = raw.iter().map(|r| r.1).sum();
+        let n = raw.len() as f64;
+        raw.into_iter()
+            .map(|(i, s)| (i, if total > 0.0 { s / total } else { 1.0 / n }))
+            .collect()
+    }
+
+    /// Blend weights (linear light, summing to one over the channels lighting each wall point)
+    /// for every pixel of `ch`, given its wall points (from its warp).
+    pub fn blend_weights(&self, ch: &Channel, points: &[Option<DVec3>]) -> Vec<f32> {
+        let w = ch.width as usize;
+        points
+            .par_iter()
+            .enumerate()
+            .map(|(n, p)| {
+                let Some(p) = p else { return 0.0 };
+                let own = edge_weight(ch, [(n % w) as f64, (n / w) as f64]);
+                let others: f64 = self
+                    .channels
+                    .iter()
+                    .filter(|o| o.id != ch.id)
+                    .filter_map(|o| self.pixel_lighting(o, *p).map(|q| edge_weight(o, q)))
+                    .sum();
+                if own + others <= 0.0 {
+                    // At the very edge of every projector lighting it: share equally.
+                    let count = 1 + self
+                        .channels
+                        .iter()
+                        .filter(|o| o.id != ch.id && self.pixel_lighting(o, *p).is_some())
+                        .count();
+                    return (1.0 / count as f64) as f32;
+                }
+                (own / (own + others)) as f32
+            })
+            .collect()
+    }
+}
+
+/// Writes blend weights as a 16-bit grey PNG in signal space (m = w^(1/γ)).
+pub fn write_blend_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    weights: &[f32],
+    opts: BlendOptions,
+) -> Result<()> {
+    if !(opts.gamma.is_finite() && opts.gamma > 0.0) {
+        return Err(Error::invalid(
+            "gamma",
+            format!("must be positive, got {}", opts.gamma),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(weights.len() * 2);
+    for &w in weights {
+        let m = f64::from(w.clamp(0.0, 1.0)).powf(1.0 / opts.gamma);
+        bytes.extend_from_slice(&((m * 65535.0).round() as u16).to_be_bytes());
+    }
+    atomic_write(path, |f| {
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(f), width, height);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Sixteen);
+        enc.add_text_chunk("omniwarp.blend_gamma".into(), format!("{}", opts.gamma))
+            .map_err(|e| Error::file(path, e))?;
+        let mut w = enc.write_header().map_err(|e| Error::file(path, e))?;
+        w.write_image_data(&bytes)
+            .map_err(|e| Error::file(path, e))?;
+        w.finish().map_err(|e| Error::file(path, e))
+    })
+}

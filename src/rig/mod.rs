@@ -1,0 +1,313 @@
+//! The rig: one versioned JSON document (`"format": 1`) with the screen, the viewer's eye
+//! point, the content orientation and the projector channels (DESIGN.md). Errors name the field
+//! by its JSON pointer (`/channels/1/lens/intrinsics`) and say why.
+//!
+//! A channel's pose is the projector-to-world transform: `position` plus either `look_to` and
+//! `look_up` or `rvec` (OpenCV's Rodrigues vector of that rotation; note that OpenCV's
+//! `solvePnP` returns the inverse, world-to-camera). The projector frame is OpenCV's: x right,
+//! y down, z forward.
+
+mod blend;
+mod warp;
+
+pub use blend::{BlendOptions, write_blend_png};
+pub use warp::ChannelWarp;
+
+use crate::error::{Error, Result};
+use crate::lens::{Lens, LensModel};
+use crate::projection::Orientation;
+use crate::surface::Screen;
+use glam::{DMat3, DVec3};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The rig file as written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigDoc {
+    pub format: u32,
+    pub screen: Screen,
+    /// The sweet spot the content is computed for, metres.
+    pub eye: [f64; 3],
+    #[serde(default)]
+    pub content: ContentDoc,
+    pub channels: Vec<ChannelDoc>,
+}
+
+/// How content directions relate to the world: V = C·d − O, normalised, where d is the unit
+/// direction from the eye to the wall point and C is built from look-to/look-up as in the
+/// projection view transform.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContentDoc {
+    #[serde(default = "ahead")]
+    pub look_to: [f64; 3],
+    #[serde(default = "up")]
+    pub look_up: [f64; 3],
+    #[serde(default)]
+    pub offaxis: [f64; 3],
+}
+
+impl Default for ContentDoc {
+    fn default() -> Self {
+        ContentDoc {
+            look_to: ahead(),
+            look_up: up(),
+            offaxis: [0.0; 3],
+        }
+    }
+}
+
+fn ahead() -> [f64; 3] {
+    [0.0, 0.0, -1.0]
+}
+fn up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelDoc {
+    pub id: String,
+    /// Width and height in pixels.
+    pub resolution: [u32; 2],
+    pub lens: LensDoc,
+    pub pose: PoseDoc,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LensDoc {
+    /// mrcal's model name, e.g. `LENSMODEL_OPENCV5`.
+    pub model: String,
+    pub intrinsics: Vec<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseDoc {
+    pub position: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub look_to: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub look_up: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rvec: Option<[f64; 3]>,
+}
+
+/// A validated channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    pub id: String,
+    pub width: u32,
+    pub height: u32,
+    pub lens: Lens,
+    pub position: DVec3,
+    /// Projector frame to world.
+    pub rotation: DMat3,
+}
+
+/// A validated rig.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    pub doc: RigDoc,
+    pub eye: DVec3,
+    pub content: Orientation,
+    pub offaxis: DVec3,
+    pub channels: Vec<Channel>,
+}
+
+/// Rodrigues: rotation by |r| about r/|r|.
+pub fn rodrigues(r: DVec3) -> DMat3 {
+    let theta = r.length();
+    if theta < f64::EPSILON {
+        return DMat3::IDENTITY;
+    }
+    DMat3::from_axis_angle(r / theta, theta)
+}
+
+fn vec3(field: &str, v: [f64; 3]) -> Result<DVec3> {
+    crate::surface::finite3(field, DVec3::from_array(v))
+}
+
+impl Rig {
+    /// Parses and validates a rig; `base` is where relative paths (mesh screens) start.
+    pub fn from_json(text: &str, base: &Path) -> Result<Rig> {
+        let de = &mut serde_json::Deserializer::from_str(text);
+        let mut doc: RigDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+            let pointer = pointer_of(&e.path().to_string());
+            Error::invalid(pointer, e.into_inner().to_string())
+        })?;
+        doc.screen.load(base, "/screen")?;
+        Rig::from_doc(doc)
+    }
+
+    pub fn read(path: &Path) -> Result<Rig> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        Rig::from_json(&text, base).map_err(|e| Error::file(path, e))
+    }
+
+    pub fn from_doc(doc: RigDoc) -> Result<Rig> {
+        if doc.format != 1 {
+            return Err(Error::invalid(
+                "/format",
+                format!("only format 1 is known, got {}", doc.format),
+            ));
+        }
+        doc.screen.validate("/screen")?;
+        let eye = vec3("/eye", doc.eye)?;
+        let content = Orientation::look(
+            vec3("/content/look_to", doc.content.look_to)?,
+            vec3("/content/look_up", doc.content.look_up)?,
+        )
+        .map_err(|e| Error::invalid("/content", e.to_string()))?;
+        let offaxis = vec3("/content/offaxis", doc.content.offaxis)?;
+        if offaxis.length() >= 1.0 {
+            return Err(Error::invalid(
+                "/content/offaxis",
+                "its length must be below 1",
+            ));
+        }
+        if doc.channels.is_empty() {
+            return Err(Error::invalid(
+                "/channels",
+                "a rig needs at least one channel",
+            ));
+        }
+        let mut channels = Vec::with_capacity(doc.channels.len());
+        for (n, c) in doc.channels.iter().enumerate() {
+            let at = |f: &str| format!("/channels/{n}/{f}");
+            if c.id.is_empty() || c.id.contains(['/', '\\']) || c.id.starts_with('.') {
+                return Err(Error::invalid(
+                    at("id"),
+                    "must be a non-empty name usable as a file name",
+                ));
+            }
+            if doc.channels[..n].iter().any(|o| o.id == c.id) {
+                return Err(Error::invalid(
+                    at("id"),
+                    format!("`{}` is used by another channel", c.id),
+                ));
+            }
+            let [w, h] = c.resolution;
+            if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+                return Err(Error::invalid(
+                    at("resolution"),
+                    format!("must be between 1 and 16384 pixels each way, got {w}×{h}"),
+                ));
+            }
+            let model: LensModel = c
+                .lens
+                .model
+                .parse()
+                .map_err(|e: Error| Error::invalid(at("lens/model"), reason(e)))?;
+            let lens = Lens::new(model, c.lens.intrinsics.clone())
+                .map_err(|e| Error::invalid(at("lens/intrinsics"), reason(e)))?;
+            let position = vec3(&at("pose/position"), c.pose.position)?;
+            let rotation = match (c.pose.look_to, c.pose.look_up, c.pose.rvec) {
+                (Some(to), Some(upv), None) => {
+                    let f = crate::surface::unit(&at("pose/look_to"), DVec3::from_array(to))?;
+                    let u = crate::surface::unit(&at("pose/look_up"), DVec3::from_array(upv))?;
+                    let right = f.cross(u);
+                    if right.length() < 1e-6 {
+                        return Err(Error::invalid(
+                            at("pose/look_up"),
+                            "must not be parallel to look_to",
+                        ));
+                    }
+                    let right = right.normalize();
+                    // OpenCV frame: x right, y down, z forward.
+                    DMat3::from_cols(right, f.cross(right), f)
+                }
+                (None, None, Some(r)) => rodrigues(vec3(&at("pose/rvec"), r)?),
+                _ => {
+                    return Err(Error::invalid(
+                        at("pose"),
+                        "give either look_to and look_up, or rvec",
+                    ));
+                }
+            };
+            channels.push(Channel {
+                id: c.id.clone(),
+                width: w,
+                height: h,
+                lens,
+                position,
+                rotation,
+            });
+        }
+        Ok(Rig {
+            doc,
+            eye,
+            content,
+            offaxis,
+            channels,
+        })
+    }
+
+    pub fn channel(&self, id: &str) -> Result<&Channel> {
+        self.channels.iter().find(|c| c.id == id).ok_or_else(|| {
+            let ids: Vec<_> = self.channels.iter().map(|c| c.id.as_str()).collect();
+            Error::invalid(
+                "channel",
+                format!("no channel `{id}`; the rig has {}", ids.join(", ")),
+            )
+        })
+    }
+
+    /// The same rig with every projector's resolution divided by `factor` (the lenses scaled to
+    /// match): previews and tests at a fraction of the cost.
+    pub fn downscaled(&self, factor: u32) -> Result<Rig> {
+        let f = f64::from(factor.max(1));
+        let mut doc = self.doc.clone();
+        for (c, ch) in doc.channels.iter_mut().zip(&self.channels) {
+            c.resolution = [
+                (ch.width / factor.max(1)).max(1),
+                (ch.height / factor.max(1)).max(1),
+            ];
+            let i = &mut c.lens.intrinsics;
+            i[0] /= f;
+            i[1] /= f;
+            i[2] = (i[2] + 0.5) / f - 0.5;
+            i[3] = (i[3] + 0.5) / f - 0.5;
+        }
+        let screen = doc.screen.clone();
+        let mut rig = Rig::from_doc(doc)?;
+        rig.doc.screen = screen;
+        Ok(rig)
+    }
+}
+
+fn reason(e: Error) -> String {
+    match e {
+        Error::Invalid { reason, .. } => reason,
+        other => other.to_string(),
+    }
+}
+
+/// serde_path_to_error's `channels[1].lens.model` as a JSON pointer `/channels/1/lens/model`.
+fn pointer_of(path: &str) -> String {
+    if path == "." || path.is_empty() {
+        return "/".into();
+    }
+    let mut out = String::new();
+    for part in path.split('.') {
+        let mut rest = part;
+        while let Some(open) = rest.find('[') {
+            if open > 0 {
+                out.push('/');
+                out.push_str(&rest[..open]);
+            }
+            let close = rest[open..].find(']').map_or(rest.len(), |c| open + c);
+            out.push('/');
+            out.push_str(&rest[open + 1..close]);
+            rest = &rest[(close + 1).min(rest.len())..];
+        }
+        if !rest.is_empty() {
+            out.push('/');
+            out.push_str(rest);
+        }
+    }
+    out
+}

@@ -1,0 +1,87 @@
+//! Per-channel warps: projector pixel (i, j) → unproject q = (i, j) (pixel centres at integers,
+//! as lens models count them) → world ray → first lit wall point P → direction from the eye →
+//! content sampling vector V. Exact per pixel, rows in parallel.
+
+use super::{Channel, Rig};
+use crate::normalmap::NormalMap;
+use crate::raster::Raster;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// A channel's warp: V per pixel (the warp map), and the wall point it lands on.
+#[derive(Debug, Clone)]
+pub struct ChannelWarp {
+    pub map: NormalMap,
+    /// X, Y, Z of the wall point in metres, A = 1 where the pixel lights the wall.
+    pub wall: Raster<[f32; 4]>,
+    /// The wall points in full precision (`None` off the wall).
+    pub points: Vec<Option<DVec3>>,
+}
+
+impl Rig {
+    /// The wall point projector pixel q of channel `ch` lights, if any.
+    pub fn wall_point(&self, ch: &Channel, q: [f64; 2]) -> Option<DVec3> {
+        let ray = ch.lens.unproject(q).ok()?;
+        self.doc
+            .screen
+            .intersect(ch.position, ch.rotation * ray)
+            .point()
+    }
+
+    /// The content sampling vector for wall point `p`.
+    pub fn sampling_vector(&self, p: DVec3) -> Option<DVec3> {
+        let d = (p - self.eye).try_normalize()?;
+        Some((self.content.apply(d) - self.offaxis).normalize())
+    }
+
+    pub fn warp(&self, ch: &Channel) -> ChannelWarp {
+        let (w, h) = (ch.width as usize, ch.height as usize);
+        let mut points: Vec<Option<DVec3>> = vec![None; w * h];
+        // Along a row each pixel's ray starts the next one's iterative unprojection.
+        points.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
+            let mut guess = None;
+            for (i, p) in row.iter_mut().enumerate() {
+                let ray = ch.lens.unproject_near([i as f64, j as f64], guess).ok();
+                guess = ray;
+                *p = ray.and_then(|r| {
+                    self.doc
+                        .screen
+                        .intersect(ch.position, ch.rotation * r)
+                        .point()
+                });
+            }
+        });
+        let vector = |p: &Option<DVec3>| p.and_then(|p| self.sampling_vector(p));
+        let map = Raster {
+            width: w,
+            height: h,
+            data: points
+                .par_iter()
+                .map(|p| match vector(p) {
+                    Some(v) => [v.x as f32, v.y as f32, v.z as f32, 1.0],
+                    None => [0.0; 4],
+                })
+                .collect(),
+        };
+        let wall = Raster {
+            width: w,
+            height: h,
+            data: points
+                .iter()
+                .map(|p| match p {
+                    Some(p) => [p.x as f32, p.y as f32, p.z as f32, 1.0],
+                    None => [0.0; 4],
+                })
+                .collect(),
+        };
+        let attributes = vec![
+            ("omniwarp.channel".to_string(), ch.id.clone()),
+            ("omniwarp.projection".to_string(), "rig".to_string()),
+        ];
+        ChannelWarp {
+            map: NormalMap::from_pixels(map, attributes).expect("unit vectors and 0/1 validity"),
+            wall,
+            points,
+        }
+    }
+}

@@ -1,0 +1,152 @@
+//! Projection surfaces and ray intersection. A screen is lit from inside (projectors and viewer
+//! face it from the same side), and every intersection reports the nearest hit the projector
+//! actually lights, a miss, or a grazing hit (light arriving within [`GRAZING_DEG`] of the
+//! surface's tangent plane, which spreads a pixel over too much wall to be trusted).
+//!
+//! World frame as DESIGN.md: metres, +y up, −z ahead. Azimuths are measured like longitude:
+//! 0 towards −z, positive towards +x.
+
+mod mesh;
+mod shapes;
+
+pub use mesh::Mesh;
+pub use shapes::{Cylinder, Dome, Plane};
+
+use crate::error::{Error, Result};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+/// Hits arriving closer than this to the tangent plane count as grazing.
+pub const GRAZING_DEG: f64 = 89.0;
+
+/// Rays start this far in front of their origin, so a point on the surface does not hit itself.
+const EPS: f64 = 1e-9;
+
+/// What a ray meets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Hit {
+    /// The first lit point: distance along the unit ray, the point, the unit normal facing the
+    /// ray's origin.
+    Lit {
+        t: f64,
+        point: DVec3,
+        normal: DVec3,
+    },
+    /// The ray meets the surface only at a grazing angle (the point is given for diagnostics).
+    Grazing {
+        point: DVec3,
+    },
+    Miss,
+}
+
+impl Hit {
+    pub fn point(&self) -> Option<DVec3> {
+        match self {
+            Hit::Lit { point, .. } => Some(*point),
+            _ => None,
+        }
+    }
+}
+
+/// Classifies a candidate hit at distance t with geometric normal n.
+fn classify(origin: DVec3, dir: DVec3, t: f64, n: DVec3) -> Hit {
+    let point = origin + dir * t;
+    let n = if n.dot(dir) > 0.0 { -n } else { n };
+    let cos = -n.dot(dir);
+    if cos < (90.0 - GRAZING_DEG).to_radians().sin() {
+        Hit::Grazing { point }
+    } else {
+        Hit::Lit {
+            t,
+            point,
+            normal: n,
+        }
+    }
+}
+
+/// A projection screen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Screen {
+    Cylinder(Cylinder),
+    Dome(Dome),
+    Plane(Plane),
+    /// A triangle mesh from an OBJ file (path relative to the rig file).
+    Mesh {
+        obj: String,
+        #[serde(skip)]
+        loaded: Option<std::sync::Arc<Mesh>>,
+    },
+}
+
+impl Screen {
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
+    pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
+        match self {
+            Screen::Cylinder(c) => c.intersect(origin, dir),
+            Screen::Dome(d) => d.intersect(origin, dir),
+            Screen::Plane(p) => p.intersect(origin, dir),
+            Screen::Mesh { loaded, .. } => loaded
+                .as_ref()
+                .map_or(Hit::Miss, |m| m.intersect(origin, dir)),
+        }
+    }
+
+    /// Checks the geometry; `field` is the JSON pointer of this screen for error messages.
+    pub fn validate(&self, field: &str) -> Result<()> {
+        match self {
+            Screen::Cylinder(c) => c.validate(field),
+            Screen::Dome(d) => d.validate(field),
+            Screen::Plane(p) => p.validate(field),
+            Screen::Mesh { loaded, obj } => match loaded {
+                Some(_) => Ok(()),
+                None => Err(Error::invalid(
+                    format!("{field}/obj"),
+                    format!("mesh `{obj}` is not loaded"),
+                )),
+            },
+        }
+    }
+
+    /// Loads a mesh screen's OBJ file, relative to `base`.
+    pub fn load(&mut self, base: &std::path::Path, field: &str) -> Result<()> {
+        if let Screen::Mesh { obj, loaded } = self {
+            let path = base.join(&*obj);
+            let mesh = Mesh::read_obj(&path)
+                .map_err(|e| Error::invalid(format!("{field}/obj"), e.to_string()))?;
+            *loaded = Some(std::sync::Arc::new(mesh));
+        }
+        Ok(())
+    }
+}
+
+pub fn finite3(field: &str, v: DVec3) -> Result<DVec3> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::invalid(field, format!("must be finite, got {v}")))
+    }
+}
+
+pub fn positive(field: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("must be a positive number, got {v}"),
+        ))
+    }
+}
+
+/// A unit vector from a non-zero finite one.
+pub fn unit(field: &str, v: DVec3) -> Result<DVec3> {
+    let v = finite3(field, v)?;
+    if v.length() < 1e-12 {
+        return Err(Error::invalid(field, "must not be the zero vector"));
+    }
+    Ok(v.normalize())
+}
+
+#[cfg(test)]
+mod tests;
