@@ -53,6 +53,11 @@ enum Command {
     Warp(crate::rig_cmd::WarpArgs),
     /// Edge-blend masks for every channel of a rig (16-bit PNG, gamma-encoded).
     Blend(crate::rig_cmd::BlendArgs),
+    /// Calibrate a projector from measured pixel ↔ wall-point correspondences; writes a rig
+    /// channel.
+    Calibrate(crate::calibrate_cmd::CalibrateArgs),
+    /// Time calibration against point count (50, 500, 5000) and lens model.
+    CalibrateBench,
     /// Time warp generation (3840×2160 on every surface type) and the dome example's blends.
     WarpBench {
         /// The rig whose blends are timed.
@@ -396,6 +401,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Warp(a) => crate::rig_cmd::warp(a),
         Command::Blend(a) => crate::rig_cmd::blend(a),
         Command::WarpBench { rig } => crate::rig_cmd::bench(&rig),
+        Command::Calibrate(a) => crate::calibrate_cmd::run(a),
+        Command::CalibrateBench => crate::calibrate_cmd::bench(),
     }
 }
 

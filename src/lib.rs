@@ -4,6 +4,7 @@
 //! [`projection`], cube maps in [`cubemap`], content sources in [`content`], the CPU reference
 //! renderer in [`render`] and the float normal maps (warp maps) in [`normalmap`].
 
+pub mod calibration;
 pub mod content;
 pub mod cubemap;
 pub mod error;

@@ -1,6 +1,7 @@
 //! The `omniwarp` command: a thin layer over the library.
 
 mod bench;
+mod calibrate_cmd;
 mod cli;
 mod lens_cmd;
 mod rig_cmd;

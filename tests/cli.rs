@@ -796,3 +796,93 @@ fn rig_warp_blend_and_render_from_the_command_line() {
         assert!(!s.path("bad.exr").exists() && !s.path("bad.png").exists());
     }
 }
+
+#[test]
+fn calibrate_writes_a_channel_that_drops_into_a_rig() {
+    let s = Scene::new();
+    let fixture = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("calibration/fixtures/calibration/opencv_cylinder.json"),
+    )
+    .unwrap();
+    let v: serde_json::Value = serde_json::from_str(&fixture).unwrap();
+    let input = serde_json::json!({ "resolution": v["resolution"], "points": v["points"] });
+    std::fs::write(s.path("c.json"), input.to_string()).unwrap();
+    let (ok, err) = s.run(&[
+        "calibrate",
+        "--correspondences",
+        "c.json",
+        "--model",
+        "LENSMODEL_OPENCV5",
+        "--id",
+        "left",
+        "--out",
+        "left.json",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("chosen LENSMODEL_OPENCV5") && err.contains("warning: the focal length"),
+        "{err}"
+    );
+    let channel = std::fs::read_to_string(s.path("left.json")).unwrap();
+    let rig = format!(
+        r#"{{ "format": 1, "screen": {{ "kind": "cylinder", "radius": 2.0, "height": [-2, 2] }}, "eye": [0, 0, 0], "channels": [{channel}] }}"#
+    );
+    let rig = omniwarp::rig::Rig::from_json(&rig, Path::new(".")).unwrap();
+    let c = &rig.channels[0];
+    // The calibrated projector's centre is where the oracle put it, to a few millimetres.
+    assert!(
+        c.position.distance(glam::DVec3::new(0.12, -0.35, -0.60)) < 0.02,
+        "{}",
+        c.position
+    );
+    for (args, flag) in [
+        (
+            vec![
+                "calibrate",
+                "--correspondences",
+                "missing.json",
+                "--out",
+                "x.json",
+            ],
+            "--correspondences",
+        ),
+        (
+            vec![
+                "calibrate",
+                "--correspondences",
+                "c.json",
+                "--model",
+                "LENSMODEL_NOPE",
+                "--out",
+                "x.json",
+            ],
+            "--model",
+        ),
+        (
+            vec![
+                "calibrate",
+                "--correspondences",
+                "c.json",
+                "--intrinsics-fixed",
+                "--out",
+                "x.json",
+            ],
+            "--intrinsics-fixed",
+        ),
+        (
+            vec![
+                "calibrate",
+                "--correspondences",
+                "eq.png",
+                "--out",
+                "x.json",
+            ],
+            "--correspondences",
+        ),
+    ] {
+        let (ok, err) = s.run(&args);
+        assert!(!ok && err.contains(flag), "{args:?}: {err}");
+        assert!(!s.path("x.json").exists());
+    }
+}

@@ -11,6 +11,8 @@ if [ ! -x "$venv/bin/python" ]; then
   "$venv/bin/pip" install -q "opencv-python-headless>=4.10,<5" "numpy<3"
 fi
 "$venv/bin/python" calibration/oracles/opencv_lens.py calibration/fixtures/lens
+mkdir -p calibration/fixtures/calibration
+"$venv/bin/python" calibration/oracles/opencv_calibration.py calibration/fixtures/calibration
 
 py312=$(command -v python3.12 || ls /root/.pyenv/versions/3.1[2-9]*/bin/python 2>/dev/null | head -1 || true)
 if [ -z "$py312" ]; then

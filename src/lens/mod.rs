@@ -125,8 +125,10 @@ impl Lens {
         }
     }
 
-    /// The formula, on any [`Real`].
-    fn formula<T: Real>(&self, intr: &[T], p: [T; 3]) -> [T; 2] {
+    /// The model's formula on any [`Real`], with intrinsics `intr` in place of the lens's own
+    /// (the calibration solver differentiates through it). No domain checks: see
+    /// [`Lens::project`].
+    pub fn formula<T: Real>(&self, intr: &[T], p: [T; 3]) -> [T; 2] {
         let core = [intr[0], intr[1], intr[2], intr[3]];
         match self.model {
             LensModel::Pinhole => opencv::project(core, &[], p),
