@@ -31,6 +31,8 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the daemon: the rig over HTTP/JSON on 127.0.0.1:7878 (see api/openapi.yaml).
+    Serve(crate::serve_cmd::ServeArgs),
     /// Render content through a projection (or a normal map) into an image.
     Render(RenderArgs),
     /// Compute a projection's normal map (per pixel the unit sampling vector V) as float EXR.
@@ -365,6 +367,7 @@ fn filter(f: FilterArg) -> Filter {
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Serve(a) => crate::serve_cmd::run(a),
         Command::Render(a) => render_cmd(a),
         Command::NormalMap(a) => {
             let (w, h) = a.size;

@@ -190,6 +190,29 @@ pub fn write_exr_rgba(
     attributes: &[(String, String)],
     precision: Precision,
 ) -> Result<()> {
+    atomic_write(path, |f| {
+        encode_exr(BufWriter::new(f), img, attributes, precision).map_err(|e| Error::file(path, e))
+    })
+}
+
+/// The EXR file of [`write_exr_rgba`], in memory (for the daemon's responses).
+pub fn exr_bytes(
+    img: &Raster<[f32; 4]>,
+    attributes: &[(String, String)],
+    precision: Precision,
+) -> Result<Vec<u8>> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    encode_exr(&mut out, img, attributes, precision)
+        .map_err(|e| Error::invalid("exr", e.to_string()))?;
+    Ok(out.into_inner())
+}
+
+fn encode_exr(
+    w: impl Write + std::io::Seek,
+    img: &Raster<[f32; 4]>,
+    attributes: &[(String, String)],
+    precision: Precision,
+) -> std::result::Result<(), exr::error::Error> {
     use exr::prelude::*;
     let mut attrs = LayerAttributes::named("rgba");
     for (k, v) in attributes {
@@ -200,28 +223,40 @@ pub fn write_exr_rgba(
     }
     let size = (img.width, img.height);
     let px = |p: Vec2<usize>| img.data[p.y() * img.width + p.x()];
-    atomic_write(path, |f| {
-        let w = BufWriter::new(f);
-        let result = match precision {
-            Precision::Float => {
-                let ch = SpecificChannels::rgba(|p: Vec2<usize>| {
-                    let [r, g, b, a] = px(p);
-                    (r, g, b, a)
-                });
-                Image::from_layer(Layer::new(size, attrs, Encoding::FAST_LOSSLESS, ch))
-                    .write()
-                    .to_buffered(w)
-            }
-            Precision::Half => {
-                let ch = SpecificChannels::rgba(|p: Vec2<usize>| {
-                    let [r, g, b, a] = px(p).map(f16::from_f32);
-                    (r, g, b, a)
-                });
-                Image::from_layer(Layer::new(size, attrs, Encoding::FAST_LOSSLESS, ch))
-                    .write()
-                    .to_buffered(w)
-            }
-        };
-        result.map_err(|e| crate::Error::file(path, e))
-    })
+    match precision {
+        Precision::Float => {
+            let ch = SpecificChannels::rgba(|p: Vec2<usize>| {
+                let [r, g, b, a] = px(p);
+                (r, g, b, a)
+            });
+            Image::from_layer(Layer::new(size, attrs, Encoding::FAST_LOSSLESS, ch))
+                .write()
+                .to_buffered(w)
+        }
+        Precision::Half => {
+            let ch = SpecificChannels::rgba(|p: Vec2<usize>| {
+                let [r, g, b, a] = px(p).map(f16::from_f32);
+                (r, g, b, a)
+            });
+            Image::from_layer(Layer::new(size, attrs, Encoding::FAST_LOSSLESS, ch))
+                .write()
+                .to_buffered(w)
+        }
+    }
+}
+
+/// An 8-bit RGBA PNG in memory.
+pub fn png_bytes(img: &Raster<[u8; 4]>) -> Result<Vec<u8>> {
+    let bytes: Vec<u8> = img.data.iter().flatten().copied().collect();
+    let mut out = Vec::new();
+    let enc = image::codecs::png::PngEncoder::new(&mut out);
+    image::ImageEncoder::write_image(
+        enc,
+        &bytes,
+        img.width as u32,
+        img.height as u32,
+        image::ExtendedColorType::Rgba8,
+    )
+    .map_err(|e| Error::invalid("png", e.to_string()))?;
+    Ok(out)
 }

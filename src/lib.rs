@@ -15,6 +15,7 @@ pub mod projection;
 pub mod raster;
 pub mod render;
 pub mod rig;
+pub mod server;
 pub mod surface;
 pub mod tiles;
 

@@ -886,3 +886,28 @@ fn calibrate_writes_a_channel_that_drops_into_a_rig() {
         assert!(!s.path("x.json").exists());
     }
 }
+
+#[test]
+fn serve_refuses_to_listen_beyond_loopback_without_a_token() {
+    let s = Scene::new();
+    let (ok, err) = s.run(&["serve", "--demo", "--bind", "0.0.0.0:0"]);
+    assert!(
+        !ok && err.contains("--bind") && err.contains("--token-file"),
+        "{err}"
+    );
+    std::fs::write(s.path("token"), "short").unwrap();
+    let (ok, err) = s.run(&[
+        "serve",
+        "--demo",
+        "--bind",
+        "0.0.0.0:0",
+        "--token-file",
+        "token",
+    ]);
+    assert!(!ok && err.contains("--token-file"), "{err}");
+    let (ok, err) = s.run(&["serve", "--bind", "127.0.0.1:0", "--data", "empty"]);
+    assert!(
+        !ok && err.contains("--data") && err.contains("--demo"),
+        "{err}"
+    );
+}

@@ -13,6 +13,7 @@ use crate::error::{Error, Result};
 use crate::image_io::atomic_write;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::io::Write;
 use std::path::Path;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -114,26 +115,41 @@ pub fn write_blend_png(
     weights: &[f32],
     opts: BlendOptions,
 ) -> Result<()> {
+    let bytes = blend_png_bytes(width, height, weights, opts)?;
+    atomic_write(path, |f| {
+        f.write_all(&bytes).map_err(|e| Error::file(path, e))
+    })
+}
+
+/// The PNG of [`write_blend_png`], in memory.
+pub fn blend_png_bytes(
+    width: u32,
+    height: u32,
+    weights: &[f32],
+    opts: BlendOptions,
+) -> Result<Vec<u8>> {
     if !(opts.gamma.is_finite() && opts.gamma > 0.0) {
         return Err(Error::invalid(
             "gamma",
             format!("must be positive, got {}", opts.gamma),
         ));
     }
-    let mut bytes = Vec::with_capacity(weights.len() * 2);
+    let mut data = Vec::with_capacity(weights.len() * 2);
     for &w in weights {
         let m = f64::from(w.clamp(0.0, 1.0)).powf(1.0 / opts.gamma);
-        bytes.extend_from_slice(&((m * 65535.0).round() as u16).to_be_bytes());
+        data.extend_from_slice(&((m * 65535.0).round() as u16).to_be_bytes());
     }
-    atomic_write(path, |f| {
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(f), width, height);
+    let mut out = Vec::new();
+    let png_err = |e: png::EncodingError| Error::invalid("png", e.to_string());
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
         enc.set_color(png::ColorType::Grayscale);
         enc.set_depth(png::BitDepth::Sixteen);
         enc.add_text_chunk("omniwarp.blend_gamma".into(), format!("{}", opts.gamma))
-            .map_err(|e| Error::file(path, e))?;
-        let mut w = enc.write_header().map_err(|e| Error::file(path, e))?;
-        w.write_image_data(&bytes)
-            .map_err(|e| Error::file(path, e))?;
-        w.finish().map_err(|e| Error::file(path, e))
-    })
+            .map_err(png_err)?;
+        let mut w = enc.write_header().map_err(png_err)?;
+        w.write_image_data(&data).map_err(png_err)?;
+        w.finish().map_err(png_err)?;
+    }
+    Ok(out)
 }

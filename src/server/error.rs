@@ -1,0 +1,83 @@
+//! One error type for the API: each variant has its status, the client gets a short JSON body
+//! `{"error": …, "field": …}`, internal detail goes to the log.
+
+use axum::Json;
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::json;
+
+#[derive(Debug)]
+pub enum ApiError {
+    /// 400: a query or body that cannot be used; `field` names it (JSON pointer for bodies).
+    Invalid { field: String, reason: String },
+    /// 401: a token is required.
+    Unauthorized,
+    /// 404
+    NotFound(String),
+    /// 412: the If-Match revision is stale; carries the current one.
+    Stale { current: u64 },
+    /// 428: writes must say which revision they change.
+    PreconditionRequired,
+    /// 503: too many renders at once.
+    Busy,
+    /// 500: logged, not detailed to the client.
+    Internal(String),
+}
+
+impl From<crate::Error> for ApiError {
+    fn from(e: crate::Error) -> Self {
+        match e {
+            crate::Error::Invalid { name, reason } => ApiError::Invalid {
+                field: name,
+                reason,
+            },
+            other => ApiError::Internal(other.to_string()),
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, body) = match &self {
+            ApiError::Invalid { field, reason } => (
+                StatusCode::BAD_REQUEST,
+                json!({"error": reason, "field": field}),
+            ),
+            ApiError::Unauthorized => (
+                StatusCode::UNAUTHORIZED,
+                json!({"error": "a bearer token is required"}),
+            ),
+            ApiError::NotFound(what) => (StatusCode::NOT_FOUND, json!({"error": what})),
+            ApiError::Stale { current } => (
+                StatusCode::PRECONDITION_FAILED,
+                json!({"error": "the resource changed since that revision", "current_revision": current}),
+            ),
+            ApiError::PreconditionRequired => (
+                StatusCode::PRECONDITION_REQUIRED,
+                json!({"error": "send If-Match with the revision you edit"}),
+            ),
+            ApiError::Busy => (
+                StatusCode::SERVICE_UNAVAILABLE,
+                json!({"error": "too many renders at once; retry shortly"}),
+            ),
+            ApiError::Internal(detail) => {
+                tracing::error!(%detail, "internal error");
+                (
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    json!({"error": "internal error"}),
+                )
+            }
+        };
+        let mut resp = (status, Json(body)).into_response();
+        if let ApiError::Stale { current } = self
+            && let Ok(v) = HeaderValue::from_str(&format!("\"{current}\""))
+        {
+            resp.headers_mut().insert(header::ETAG, v);
+        }
+        if matches!(self, ApiError::Unauthorized) {
+            resp.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        resp
+    }
+}
