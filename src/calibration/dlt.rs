@@ -32,6 +32,20 @@ fn orthonormalise(m: DMat3) -> DMat3 {
     from_na(&r)
 }
 
+/// The unit vector h minimising |A·h|: the right singular vector of the smallest singular value.
+fn null_vector(a: DMatrix<f64>) -> Result<nalgebra::DVector<f64>> {
+    let svd = a.svd(false, true);
+    let vt = svd
+        .v_t
+        .ok_or_else(|| Error::invalid("points", "the linear start did not converge"))?;
+    let (imin, _) = svd
+        .singular_values
+        .iter()
+        .enumerate()
+        .fold((0, f64::MAX), |b, (i, &s)| if s < b.1 { (i, s) } else { b });
+    Ok(vt.row(imin).transpose())
+}
+
 fn normaliser2(p: &[[f64; 2]]) -> ([f64; 2], f64) {
     let n = p.len() as f64;
     let c = [
@@ -85,16 +99,7 @@ pub fn projection_matrix(pixels: &[[f64; 2]], world: &[DVec3]) -> Result<[[f64; 
             a[(2 * i + 1, 8 + k)] = -v * xh[k];
         }
     }
-    let svd = a.svd(false, true);
-    let vt = svd
-        .v_t
-        .ok_or_else(|| Error::invalid("points", "the linear start did not converge"))?;
-    let (imin, _) = svd
-        .singular_values
-        .iter()
-        .enumerate()
-        .fold((0, f64::MAX), |b, (i, &s)| if s < b.1 { (i, s) } else { b });
-    let h = vt.row(imin);
+    let h = null_vector(a)?;
     // Undo the normalisations: P = Tp⁻¹ · Pn · Tw.
     let pn = [
         [h[0], h[1], h[2], h[3]],
@@ -219,16 +224,7 @@ fn pose_from_plane(rays: &[[f64; 2]], world: &[DVec3]) -> Result<Pose> {
             a[(2 * i + 1, 6 + k)] = -r[1] * xh[k];
         }
     }
-    let svd = a.svd(false, true);
-    let vt = svd
-        .v_t
-        .ok_or_else(|| Error::invalid("points", "the homography did not converge"))?;
-    let (imin, _) = svd
-        .singular_values
-        .iter()
-        .enumerate()
-        .fold((0, f64::MAX), |b, (i, &s)| if s < b.1 { (i, s) } else { b });
-    let h = vt.row(imin);
+    let h = null_vector(a)?;
     let (h1, h2, h3) = (
         DVec3::new(h[0], h[3], h[6]),
         DVec3::new(h[1], h[4], h[7]),
