@@ -55,6 +55,8 @@ enum Command {
     Warp(crate::rig_cmd::WarpArgs),
     /// Edge-blend masks for every channel of a rig (16-bit PNG, gamma-encoded).
     Blend(crate::rig_cmd::BlendArgs),
+    /// A channel's warp for media servers: ST-map EXR, PFM (a3) or ffmpeg remap maps.
+    Export(crate::rig_cmd::ExportArgs),
     /// Calibrate a projector from measured pixel ↔ wall-point correspondences; writes a rig
     /// channel.
     Calibrate(crate::calibrate_cmd::CalibrateArgs),
@@ -403,6 +405,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Lens(l) => crate::lens_cmd::run(l),
         Command::Warp(a) => crate::rig_cmd::warp(a),
         Command::Blend(a) => crate::rig_cmd::blend(a),
+        Command::Export(a) => crate::rig_cmd::export(a),
         Command::WarpBench { rig } => crate::rig_cmd::bench(&rig),
         Command::Calibrate(a) => crate::calibrate_cmd::run(a),
         Command::CalibrateBench => crate::calibrate_cmd::bench(),

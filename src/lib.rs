@@ -8,6 +8,7 @@ pub mod calibration;
 pub mod content;
 pub mod cubemap;
 pub mod error;
+pub mod export;
 pub mod image_io;
 pub mod lens;
 pub mod normalmap;

@@ -240,3 +240,65 @@ pub fn bench(dome_rig: &Path) -> Result<()> {
     );
     Ok(())
 }
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum ExportFormat {
+    /// ST-map EXR: R = u, G = v of the content image, origin bottom-left, A = validity.
+    Stmap,
+    /// PFM of wall XYZ per projector pixel (MPCDI's a3 meaning), NaN where none.
+    PfmA3,
+    /// ffmpeg `remap` xmap (--out) and ymap (--ymap) as 16-bit PGM.
+    Remap,
+}
+
+#[derive(Args)]
+pub struct ExportArgs {
+    /// Rig file (JSON).
+    #[arg(long)]
+    rig: PathBuf,
+    /// Channel id.
+    #[arg(long)]
+    channel: String,
+    #[arg(long, value_enum)]
+    format: ExportFormat,
+    /// The content canvas (for stmap and remap): its projection and view, as for `render`.
+    #[command(flatten)]
+    canvas: crate::cli::ProjectionArgs,
+    /// Content image size WxH in pixels (stmap and remap).
+    #[arg(long, value_parser = crate::cli::parse_size)]
+    content_size: Option<(u32, u32)>,
+    /// Output file.
+    #[arg(long)]
+    out: PathBuf,
+    /// The ymap file for --format remap.
+    #[arg(long)]
+    ymap: Option<PathBuf>,
+}
+
+pub fn export(a: ExportArgs) -> Result<()> {
+    use omniwarp::export;
+    let rig = read_rig(&a.rig)?;
+    let ch = channel(&rig, &a.channel)?;
+    let (w, h) = (ch.width as usize, ch.height as usize);
+    let warp = rig.warp(ch);
+    let canvas_uv = |size: Option<(u32, u32)>| -> Result<Vec<Option<[f64; 2]>>> {
+        let (cw, chh) = size.context("--content-size: needed for this format")?;
+        let canvas = a.canvas.view(cw, chh)?;
+        Ok(export::content_uv(&warp.map, &canvas))
+    };
+    match a.format {
+        ExportFormat::Stmap => export::write_stmap(&a.out, &canvas_uv(a.content_size)?, w, h)?,
+        ExportFormat::PfmA3 => export::write_pfm(&a.out, w, h, &export::a3_samples(&warp.points))?,
+        ExportFormat::Remap => {
+            let ymap = a
+                .ymap
+                .as_ref()
+                .context("--ymap: remap needs a second file for the rows")?;
+            let (cw, chh) = a
+                .content_size
+                .context("--content-size: needed for this format")?;
+            export::write_remap_pgm(&a.out, ymap, &canvas_uv(a.content_size)?, w, h, [cw, chh])?;
+        }
+    }
+    Ok(())
+}

@@ -911,3 +911,88 @@ fn serve_refuses_to_listen_beyond_loopback_without_a_token() {
         "{err}"
     );
 }
+
+#[test]
+fn export_writes_stmap_pfm_and_remap_maps() {
+    let s = Scene::new();
+    let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/flat-2proj.json");
+    let rig = rig.to_str().unwrap();
+    let canvas = [
+        "--projection",
+        "flat",
+        "--hfov",
+        "100",
+        "--content-size",
+        "1920x1080",
+    ];
+    let mut st = vec![
+        "export",
+        "--rig",
+        rig,
+        "--channel",
+        "left",
+        "--format",
+        "stmap",
+        "--out",
+        "st.exr",
+    ];
+    st.extend(canvas);
+    let (ok, err) = s.run(&st);
+    assert!(ok, "{err}");
+    let (ok, err) = s.run(&[
+        "export",
+        "--rig",
+        rig,
+        "--channel",
+        "left",
+        "--format",
+        "pfm-a3",
+        "--out",
+        "a3.pfm",
+    ]);
+    assert!(ok, "{err}");
+    let (w, h, xyz) = omniwarp::export::read_pfm(&s.path("a3.pfm")).unwrap();
+    assert_eq!((w, h), (1920, 1080));
+    // The wall is the plane z = −3.
+    assert!(
+        xyz.iter()
+            .filter(|p| !p[2].is_nan())
+            .all(|p| (p[2] + 3.0).abs() < 1e-4)
+    );
+    let mut rm = vec![
+        "export",
+        "--rig",
+        rig,
+        "--channel",
+        "left",
+        "--format",
+        "remap",
+        "--out",
+        "x.pgm",
+    ];
+    rm.extend(canvas);
+    let (ok, err) = s.run(&rm);
+    assert!(!ok && err.contains("--ymap"), "{err}");
+    rm.extend(["--ymap", "y.pgm"]);
+    let (ok, err) = s.run(&rm);
+    assert!(ok, "{err}");
+    let (ok, err) = s.run(&[
+        "export",
+        "--rig",
+        rig,
+        "--channel",
+        "left",
+        "--format",
+        "stmap",
+        "--projection",
+        "flat",
+        "--hfov",
+        "100",
+        "--out",
+        "bad.exr",
+    ]);
+    assert!(
+        !ok && err.contains("--content-size") && !s.path("bad.exr").exists(),
+        "{err}"
+    );
+}
