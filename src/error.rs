@@ -27,6 +27,15 @@ impl Error {
         }
     }
 
+    /// The reason alone, for callers that name the field themselves (a CLI flag, a JSON
+    /// pointer).
+    pub fn reason(self) -> String {
+        match self {
+            Error::Invalid { reason, .. } => reason,
+            other => other.to_string(),
+        }
+    }
+
     /// Shorthand for [`Error::File`].
     pub fn file(path: impl Into<PathBuf>, reason: impl std::fmt::Display) -> Self {
         Error::File {

@@ -68,28 +68,37 @@ pub fn read_cube_faces(pattern: &str) -> Result<Loaded> {
         .iter()
         .map(|f| read_image(Path::new(&pattern.replace("{face}", f.label()))))
         .collect::<Result<_>>()?;
-    let mismatch = || Error::invalid("content", "the six faces mix 8-bit and float images");
+    // Six rasters of one pixel type joined into a strip; a face of the other type is an error.
+    fn strip<T: crate::raster::Pixel>(faces: Vec<Option<Raster<T>>>) -> Result<Raster<T>> {
+        let faces: Vec<Raster<T>> = faces
+            .into_iter()
+            .map(|f| {
+                f.ok_or_else(|| {
+                    Error::invalid("content", "the six faces mix 8-bit and float images")
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(Layout::Strip.join(&CubeMap::from_faces(faces.try_into().expect("six faces"))?))
+    }
     Ok(match &faces[0] {
-        Loaded::U8(_) => {
-            let f: Vec<_> = faces
+        Loaded::U8(_) => Loaded::U8(strip(
+            faces
                 .into_iter()
                 .map(|l| match l {
-                    Loaded::U8(r) => Ok(r),
-                    Loaded::F32(_) => Err(mismatch()),
+                    Loaded::U8(r) => Some(r),
+                    Loaded::F32(_) => None,
                 })
-                .collect::<Result<_>>()?;
-            Loaded::U8(Layout::Strip.join(&CubeMap::from_faces(f.try_into().expect("six"))?))
-        }
-        Loaded::F32(_) => {
-            let f: Vec<_> = faces
+                .collect(),
+        )?),
+        Loaded::F32(_) => Loaded::F32(strip(
+            faces
                 .into_iter()
                 .map(|l| match l {
-                    Loaded::F32(r) => Ok(r),
-                    Loaded::U8(_) => Err(mismatch()),
+                    Loaded::F32(r) => Some(r),
+                    Loaded::U8(_) => None,
                 })
-                .collect::<Result<_>>()?;
-            Loaded::F32(Layout::Strip.join(&CubeMap::from_faces(f.try_into().expect("six"))?))
-        }
+                .collect(),
+        )?),
     })
 }
 

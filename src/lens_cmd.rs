@@ -54,21 +54,14 @@ impl LensArgs {
         let model: LensModel = self
             .model
             .parse()
-            .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", reason(e)))?;
+            .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", e.reason()))?;
         let intrinsics = self
             .intrinsics
             .split(',')
             .map(|v| v.trim().parse::<f64>())
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| anyhow::anyhow!("--intrinsics: expected comma-separated numbers: {e}"))?;
-        Lens::new(model, intrinsics).map_err(|e| anyhow::anyhow!("--intrinsics: {}", reason(e)))
-    }
-}
-
-fn reason(e: omniwarp::Error) -> String {
-    match e {
-        omniwarp::Error::Invalid { reason, .. } => reason,
-        other => other.to_string(),
+        Lens::new(model, intrinsics).map_err(|e| anyhow::anyhow!("--intrinsics: {}", e.reason()))
     }
 }
 

@@ -46,14 +46,7 @@ pub fn read_rig(path: &Path) -> Result<Rig> {
 
 fn channel<'a>(rig: &'a Rig, id: &str) -> Result<&'a omniwarp::rig::Channel> {
     rig.channel(id)
-        .map_err(|e| anyhow::anyhow!("--channel: {}", reason(e)))
-}
-
-fn reason(e: omniwarp::Error) -> String {
-    match e {
-        omniwarp::Error::Invalid { reason, .. } => reason,
-        other => other.to_string(),
-    }
+        .map_err(|e| anyhow::anyhow!("--channel: {}", e.reason()))
 }
 
 pub fn warp(a: WarpArgs) -> Result<()> {
@@ -102,7 +95,7 @@ pub fn blend(a: BlendArgs) -> Result<()> {
         let weights = rig.blend_weights(ch, &w.points);
         let path = a.out_dir.join(format!("{}.png", ch.id));
         write_blend_png(&path, ch.width, ch.height, &weights, opts)
-            .map_err(|e| anyhow::anyhow!("--gamma: {}", reason(e)))?;
+            .map_err(|e| anyhow::anyhow!("--gamma: {}", e.reason()))?;
         eprintln!(
             "{}: warp and blend in {:.0} ms → {}",
             ch.id,

@@ -6,6 +6,16 @@ use super::Projection;
 use crate::error::{Error, Outside, Result, finite};
 use glam::{DMat3, DVec3};
 
+/// The default look-to, straight ahead (−z), for documents that leave it out.
+pub fn default_look_to() -> [f64; 3] {
+    [0.0, 0.0, -1.0]
+}
+
+/// The default look-up, +y, for documents that leave it out.
+pub fn default_look_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
 /// The content orientation C: an orthonormal, right-handed basis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Orientation(DMat3);

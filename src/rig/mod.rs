@@ -40,9 +40,9 @@ pub struct RigDoc {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ContentDoc {
-    #[serde(default = "ahead")]
+    #[serde(default = "crate::projection::view::default_look_to")]
     pub look_to: [f64; 3],
-    #[serde(default = "up")]
+    #[serde(default = "crate::projection::view::default_look_up")]
     pub look_up: [f64; 3],
     #[serde(default)]
     pub offaxis: [f64; 3],
@@ -51,18 +51,11 @@ pub struct ContentDoc {
 impl Default for ContentDoc {
     fn default() -> Self {
         ContentDoc {
-            look_to: ahead(),
-            look_up: up(),
+            look_to: crate::projection::view::default_look_to(),
+            look_up: crate::projection::view::default_look_up(),
             offaxis: [0.0; 3],
         }
     }
-}
-
-fn ahead() -> [f64; 3] {
-    [0.0, 0.0, -1.0]
-}
-fn up() -> [f64; 3] {
-    [0.0, 1.0, 0.0]
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -201,9 +194,9 @@ impl Rig {
                 .lens
                 .model
                 .parse()
-                .map_err(|e: Error| Error::invalid(at("lens/model"), reason(e)))?;
+                .map_err(|e: Error| Error::invalid(at("lens/model"), e.reason()))?;
             let lens = Lens::new(model, c.lens.intrinsics.clone())
-                .map_err(|e| Error::invalid(at("lens/intrinsics"), reason(e)))?;
+                .map_err(|e| Error::invalid(at("lens/intrinsics"), e.reason()))?;
             let position = vec3(&at("pose/position"), c.pose.position)?;
             let rotation = match (c.pose.look_to, c.pose.look_up, c.pose.rvec) {
                 (Some(to), Some(upv), None) => {
@@ -272,17 +265,8 @@ impl Rig {
             i[2] = (i[2] + 0.5) / f - 0.5;
             i[3] = (i[3] + 0.5) / f - 0.5;
         }
-        let screen = doc.screen.clone();
-        let mut rig = Rig::from_doc(doc)?;
-        rig.doc.screen = screen;
-        Ok(rig)
-    }
-}
-
-fn reason(e: Error) -> String {
-    match e {
-        Error::Invalid { reason, .. } => reason,
-        other => other.to_string(),
+        // The cloned document keeps the loaded mesh, if any.
+        Rig::from_doc(doc)
     }
 }
 

@@ -17,9 +17,9 @@ pub struct Source {
     pub params: Params,
     /// Output height / width the projection was built for.
     pub aspect: f64,
-    #[serde(default = "ahead")]
+    #[serde(default = "crate::projection::view::default_look_to")]
     pub look_to: [f64; 3],
-    #[serde(default = "up")]
+    #[serde(default = "crate::projection::view::default_look_up")]
     pub look_up: [f64; 3],
     #[serde(default)]
     pub offaxis: [f64; 3],
@@ -27,12 +27,6 @@ pub struct Source {
     pub zoom: f64,
 }
 
-fn ahead() -> [f64; 3] {
-    [0.0, 0.0, -1.0]
-}
-fn up() -> [f64; 3] {
-    [0.0, 1.0, 0.0]
-}
 fn one() -> f64 {
     1.0
 }
@@ -44,8 +38,8 @@ impl Source {
             projection: projection.into(),
             params,
             aspect,
-            look_to: ahead(),
-            look_up: up(),
+            look_to: crate::projection::view::default_look_to(),
+            look_up: crate::projection::view::default_look_up(),
             offaxis: [0.0; 3],
             zoom: 1.0,
         }
