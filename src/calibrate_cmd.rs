@@ -4,7 +4,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::calibration::{Correspondence, ModelChoice, Problem, calibrate};
 use omniwarp::lens::{Lens, LensModel};
-use omniwarp::rig::{ChannelDoc, LensDoc, PoseDoc};
+use omniwarp::rig::LensDoc;
 use serde::Deserialize;
 use std::path::PathBuf;
 
@@ -102,21 +102,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     for w in &cal.warnings {
         eprintln!("warning: {w}");
     }
-    let (position, rvec) = fit.projector_to_world();
-    let doc = ChannelDoc {
-        id: a.id,
-        resolution: input.resolution,
-        lens: LensDoc {
-            model: fit.lens.model().to_string(),
-            intrinsics: fit.lens.intrinsics().to_vec(),
-        },
-        pose: PoseDoc {
-            position: position.to_array(),
-            look_to: None,
-            look_up: None,
-            rvec: Some(rvec.to_array()),
-        },
-    };
+    let doc = cal.channel_doc(&a.id, input.resolution);
     let json = serde_json::to_string_pretty(&doc)?;
     omniwarp::image_io::atomic_write(&a.out, |f| {
         use std::io::Write;

@@ -33,6 +33,9 @@ pub struct Cli {
 enum Command {
     /// Run the daemon: the rig over HTTP/JSON on 127.0.0.1:7878 (see api/openapi.yaml).
     Serve(crate::serve_cmd::ServeArgs),
+    /// Load the daemon over loopback: tile edits per second and latency with many clients, and
+    /// 1080p preview latency while they edit.
+    ServeBench(crate::serve_bench::ServeBenchArgs),
     /// Render content through a projection (or a normal map) into an image.
     Render(RenderArgs),
     /// Compute a projection's normal map (per pixel the unit sampling vector V) as float EXR.
@@ -370,6 +373,7 @@ fn filter(f: FilterArg) -> Filter {
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Serve(a) => crate::serve_cmd::run(a),
+        Command::ServeBench(a) => crate::serve_bench::run(a),
         Command::Render(a) => render_cmd(a),
         Command::NormalMap(a) => {
             let (w, h) = a.size;

@@ -242,6 +242,14 @@ pub enum ExportFormat {
     PfmA3,
     /// ffmpeg `remap` xmap (--out) and ymap (--ymap) as 16-bit PGM.
     Remap,
+    /// PFM of content (x, y) on a grid sized from --tolerance (MPCDI's 2d meaning).
+    Pfm2d,
+    /// Paul Bourke warp mesh (type 2) on a grid sized from --tolerance.
+    Mesh,
+    /// The whole rig as an MPCDI v2.0 package, 2d profile (every channel, one canvas).
+    Mpcdi,
+    /// The whole rig as an MPCDI v2.0 package, a3 profile.
+    MpcdiA3,
 }
 
 #[derive(Args)]
@@ -249,11 +257,15 @@ pub struct ExportArgs {
     /// Rig file (JSON).
     #[arg(long)]
     rig: PathBuf,
-    /// Channel id.
+    /// Channel id (every format but the MPCDI packages).
     #[arg(long)]
-    channel: String,
+    channel: Option<String>,
     #[arg(long, value_enum)]
     format: ExportFormat,
+    /// Largest interpolation error of grid formats: content pixels (pfm2d, mesh, mpcdi) or
+    /// millimetres (mpcdi-a3).
+    #[arg(long)]
+    tolerance: Option<f64>,
     /// The content canvas (for stmap and remap): its projection and view, as for `render`.
     #[command(flatten)]
     canvas: crate::cli::ProjectionArgs,
@@ -269,9 +281,70 @@ pub struct ExportArgs {
 }
 
 pub fn export(a: ExportArgs) -> Result<()> {
-    use omniwarp::export;
+    use omniwarp::export::{self, channel::Sources, channel::Tolerance, mpcdi};
     let rig = read_rig(&a.rig)?;
-    let ch = channel(&rig, &a.channel)?;
+    let size = || {
+        a.content_size
+            .context("--content-size: needed for this format")
+    };
+    let tolerance = |default: f64| {
+        Tolerance::checked(a.tolerance.unwrap_or(default), "tolerance")
+            .map_err(|e| anyhow::anyhow!("--tolerance: {}", e.reason()))
+    };
+    let write = |bytes: &[u8]| {
+        omniwarp::image_io::atomic_write(&a.out, |f| {
+            std::io::Write::write_all(f, bytes).map_err(|e| omniwarp::Error::file(&a.out, e))
+        })
+    };
+    if let ExportFormat::Mpcdi | ExportFormat::MpcdiA3 = a.format {
+        let (profile, tol) = match a.format {
+            ExportFormat::Mpcdi => (mpcdi::Profile::TwoD, tolerance(0.5)?),
+            _ => (mpcdi::Profile::A3, tolerance(1.0)?),
+        };
+        let (cw, chh) = match profile {
+            mpcdi::Profile::TwoD => size()?,
+            mpcdi::Profile::A3 => a.content_size.unwrap_or((1, 1)),
+        };
+        let canvas = match profile {
+            mpcdi::Profile::TwoD => Some(a.canvas.view(cw, chh)?),
+            mpcdi::Profile::A3 => None,
+        };
+        let mut regions = Vec::new();
+        for ch in &rig.channels {
+            let warp = rig.warp(ch);
+            let uv = canvas
+                .as_ref()
+                .map(|c| export::content_uv_unbounded(&warp.map, c))
+                .unwrap_or_else(|| vec![None; warp.points.len()]);
+            let weights = rig.blend_weights(ch, &warp.points);
+            let src = Sources {
+                id: &ch.id,
+                width: ch.width as usize,
+                height: ch.height as usize,
+                uv: &uv,
+                content_size: [cw, chh],
+                points: &warp.points,
+                eye: rig.eye,
+                weights: &weights,
+            };
+            let (region, err) = src.region(profile, tol)?;
+            eprintln!(
+                "{}: {}×{} grid, worst error {err:.4}",
+                ch.id, region.warp.0, region.warp.1
+            );
+            regions.push(region);
+        }
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        write(&mpcdi::package(mpcdi::Version::V2, profile, &regions, now)?)?;
+        return Ok(());
+    }
+    let id = a
+        .channel
+        .as_deref()
+        .context("--channel: needed for this format")?;
+    let ch = channel(&rig, id)?;
     let (w, h) = (ch.width as usize, ch.height as usize);
     let warp = rig.warp(ch);
     let canvas_uv = |size: Option<(u32, u32)>| -> Result<Vec<Option<[f64; 2]>>> {
@@ -287,11 +360,41 @@ pub fn export(a: ExportArgs) -> Result<()> {
                 .ymap
                 .as_ref()
                 .context("--ymap: remap needs a second file for the rows")?;
-            let (cw, chh) = a
-                .content_size
-                .context("--content-size: needed for this format")?;
+            let (cw, chh) = size()?;
             export::write_remap_pgm(&a.out, ymap, &canvas_uv(a.content_size)?, w, h, [cw, chh])?;
         }
+        ExportFormat::Pfm2d | ExportFormat::Mesh => {
+            let (cw, chh) = size()?;
+            let uv = export::content_uv_unbounded(&warp.map, &a.canvas.view(cw, chh)?);
+            let weights = rig.blend_weights(ch, &warp.points);
+            let src = Sources {
+                id: &ch.id,
+                width: w,
+                height: h,
+                uv: &uv,
+                content_size: [cw, chh],
+                points: &warp.points,
+                eye: rig.eye,
+                weights: &weights,
+            };
+            let tol = tolerance(0.5)?;
+            if let ExportFormat::Mesh = a.format {
+                let (text, c) = src.bourke(tol)?;
+                eprintln!(
+                    "{}×{} mesh, worst error {:.4} px",
+                    c.grid.columns, c.grid.rows, c.max_error
+                );
+                write(text.as_bytes())?;
+            } else {
+                let (c, rows) = src.grid_2d(tol);
+                eprintln!(
+                    "{}×{} grid, worst error {:.4} px",
+                    c.grid.columns, c.grid.rows, c.max_error
+                );
+                export::write_pfm(&a.out, c.grid.columns, c.grid.rows, &rows)?;
+            }
+        }
+        ExportFormat::Mpcdi | ExportFormat::MpcdiA3 => unreachable!("handled above"),
     }
     Ok(())
 }

@@ -8,7 +8,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 /// The demo rig: the 270° cylinder with three projectors from calibration/rigs/.
-const DEMO_RIG: &str = include_str!("../calibration/rigs/cylinder-270-3proj.json");
+pub const DEMO_RIG: &str = include_str!("../calibration/rigs/cylinder-270-3proj.json");
 
 #[derive(Args)]
 pub struct ServeArgs {
@@ -28,7 +28,11 @@ pub struct ServeArgs {
 }
 
 pub fn run(a: ServeArgs) -> Result<()> {
-    tracing_subscriber::fmt().with_target(false).init();
+    // Logs on stderr; stdout carries only the "listening on" line scripts read.
+    tracing_subscriber::fmt()
+        .with_target(false)
+        .with_writer(std::io::stderr)
+        .init();
     let token = match &a.token_file {
         Some(p) => {
             let t = std::fs::read_to_string(p)
@@ -62,7 +66,11 @@ pub fn run(a: ServeArgs) -> Result<()> {
         let listener = tokio::net::TcpListener::bind(a.bind)
             .await
             .with_context(|| format!("--bind {}", a.bind))?;
-        tracing::info!(addr = %listener.local_addr()?, "omniwarp serving /v1");
+        let addr = listener.local_addr()?;
+        tracing::info!(%addr, "omniwarp serving /v1");
+        // On stdout too, so scripts and tests that bind port 0 learn the port.
+        println!("listening on http://{addr}");
+        std::io::Write::flush(&mut std::io::stdout())?;
         launch(listener, state, shutdown_signal()).await?;
         tracing::info!("stopped");
         Ok(())

@@ -996,3 +996,50 @@ fn export_writes_stmap_pfm_and_remap_maps() {
         "{err}"
     );
 }
+
+#[test]
+fn export_writes_meshes_2d_grids_and_mpcdi_packages() {
+    let s = Scene::new();
+    let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/flat-2proj.json");
+    let rig = rig.to_str().unwrap();
+    let canvas = [
+        "--projection",
+        "flat",
+        "--hfov",
+        "100",
+        "--content-size",
+        "1920x1080",
+    ];
+    let run = |format: &str, out: &str, extra: &[&str]| {
+        let mut args = vec!["export", "--rig", rig, "--format", format, "--out", out];
+        args.extend(canvas);
+        args.extend(extra);
+        s.run(&args)
+    };
+    let (ok, err) = run(
+        "mesh",
+        "left.data",
+        &["--channel", "left", "--tolerance", "1"],
+    );
+    assert!(ok, "{err}");
+    let mesh =
+        omniwarp::export::bourke::read_mesh(&std::fs::read_to_string(s.path("left.data")).unwrap())
+            .unwrap();
+    assert!(
+        mesh.nx > 2 && mesh.nx < 1921 && err.contains("worst error"),
+        "{err}"
+    );
+    let (ok, err) = run("pfm2d", "left.pfm", &["--channel", "left"]);
+    assert!(ok, "{err}");
+    let (ok, err) = run("mpcdi", "rig.mpcdi", &[]);
+    assert!(ok, "{err}");
+    let pkg = omniwarp::export::mpcdi::read(&std::fs::read(s.path("rig.mpcdi")).unwrap()).unwrap();
+    assert_eq!(pkg.buffers[0].regions.len(), 2);
+    let (ok, err) = run("mesh", "x.data", &[]);
+    assert!(!ok && err.contains("--channel"), "{err}");
+    let (ok, err) = run("mesh", "y.data", &["--channel", "left", "--tolerance", "0"]);
+    assert!(
+        !ok && err.contains("--tolerance") && !s.path("y.data").exists(),
+        "{err}"
+    );
+}

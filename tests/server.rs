@@ -1,56 +1,13 @@
 //! The daemon's routes through `oneshot` (no socket), one real server on port 0, and the
 //! OpenAPI document checked against the router.
 
+mod common;
+
 use axum::body::Body;
 use axum::http::{Request, StatusCode, header};
-use http_body_util::BodyExt;
-use omniwarp::rig::RigDoc;
-use omniwarp::server::{AppState, ROUTES, Store, router};
+use common::server::{call, get, json, state};
+use omniwarp::server::ROUTES;
 use std::path::Path;
-use std::sync::Arc;
-use tower::ServiceExt;
-
-fn flat_rig() -> RigDoc {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/flat-2proj.json"),
-    )
-    .unwrap();
-    let mut doc: RigDoc = serde_json::from_str(&text).unwrap();
-    // Small projectors keep the warps quick.
-    for c in &mut doc.channels {
-        c.resolution = [192, 108];
-        let i = &mut c.lens.intrinsics;
-        i[0] /= 10.0;
-        i[1] /= 10.0;
-        i[2] = (i[2] + 0.5) / 10.0 - 0.5;
-        i[3] = (i[3] + 0.5) / 10.0 - 0.5;
-    }
-    doc
-}
-
-fn state(dir: Option<&Path>, token: Option<&str>) -> Arc<AppState> {
-    AppState::new(
-        Store::open(dir.map(Path::to_path_buf), Some(flat_rig())).unwrap(),
-        token.map(String::from),
-    )
-}
-
-async fn call(
-    s: &Arc<AppState>,
-    req: Request<Body>,
-) -> (StatusCode, axum::http::HeaderMap, Vec<u8>) {
-    let resp = router(s.clone()).oneshot(req).await.unwrap();
-    let (parts, body) = resp.into_parts();
-    (
-        parts.status,
-        parts.headers,
-        body.collect().await.unwrap().to_bytes().to_vec(),
-    )
-}
-
-fn get(uri: &str) -> Request<Body> {
-    Request::get(uri).body(Body::empty()).unwrap()
-}
 
 fn put_rig(body: String, if_match: Option<&str>) -> Request<Body> {
     let mut b = Request::put("/v1/rig").header(header::CONTENT_TYPE, "application/json");
@@ -58,10 +15,6 @@ fn put_rig(body: String, if_match: Option<&str>) -> Request<Body> {
         b = b.header(header::IF_MATCH, m);
     }
     b.body(Body::from(body)).unwrap()
-}
-
-fn json(bytes: &[u8]) -> serde_json::Value {
-    serde_json::from_slice(bytes).unwrap()
 }
 
 #[tokio::test]
@@ -94,7 +47,7 @@ async fn every_route_answers_and_every_error_class_is_reported() {
     assert_eq!(&body[..4], &[0x76, 0x2f, 0x31, 0x01], "EXR magic");
     let (st, _, body) = call(&s, get("/v1/channels/left/blend.png?gamma=2.4")).await;
     assert_eq!((st, &body[1..4]), (StatusCode::OK, &b"PNG"[..]));
-    let (st, _, body) = call(&s, get("/v1/channels/right/render.png?face=32")).await;
+    let (st, _, body) = call(&s, get("/v1/channels/right/render?face=32")).await;
     assert_eq!((st, &body[1..4]), (StatusCode::OK, &b"PNG"[..]));
 
     // Errors: unknown channel or route, bad query, missing/stale If-Match, invalid body.
@@ -103,7 +56,7 @@ async fn every_route_answers_and_every_error_class_is_reported() {
         StatusCode::NOT_FOUND
     );
     assert_eq!(call(&s, get("/v1/nothing")).await.0, StatusCode::NOT_FOUND);
-    let (st, _, body) = call(&s, get("/v1/channels/left/render.png?face=4")).await;
+    let (st, _, body) = call(&s, get("/v1/channels/left/render?face=4")).await;
     assert_eq!(
         (st, json(&body)["field"].as_str()),
         (StatusCode::BAD_REQUEST, Some("face"))
@@ -164,7 +117,7 @@ async fn every_route_answers_and_every_error_class_is_reported() {
     assert_eq!(
         fallback.store.snapshot().1,
         2,
-        "the last good revision, from rig.prev.json"
+        "the last good revision, from rig.json.prev"
     );
 }
 

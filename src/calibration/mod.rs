@@ -251,3 +251,24 @@ fn cross_validate(problem: &Problem, model: LensModel) -> Result<f64> {
     }
     Ok((sum / n as f64).sqrt())
 }
+
+impl Calibration {
+    /// The solved projector as a rig channel (pose as projector-to-world rvec).
+    pub fn channel_doc(&self, id: &str, resolution: [u32; 2]) -> crate::rig::ChannelDoc {
+        let (position, rvec) = self.fit.projector_to_world();
+        crate::rig::ChannelDoc {
+            id: id.to_string(),
+            resolution,
+            lens: crate::rig::LensDoc {
+                model: self.fit.lens.model().to_string(),
+                intrinsics: self.fit.lens.intrinsics().to_vec(),
+            },
+            pose: crate::rig::PoseDoc {
+                position: position.to_array(),
+                look_to: None,
+                look_up: None,
+                rvec: Some(rvec.to_array()),
+            },
+        }
+    }
+}

@@ -7,6 +7,11 @@
 //! Content coordinates come from the content canvas: a projection and view whose inverse turns
 //! each sampling vector into a position on the content image.
 
+pub mod bourke;
+pub mod channel;
+pub mod grid;
+pub mod mpcdi;
+
 use crate::error::{Error, Result};
 use crate::image_io::{Precision, atomic_write, write_exr_rgba};
 use crate::normalmap::NormalMap;
@@ -20,6 +25,19 @@ use std::path::Path;
 /// Content image coordinates (u, v) ∈ [0, 1]², top-left origin, of every warp pixel; `None`
 /// where the pixel is invalid or its direction falls outside the canvas.
 pub fn content_uv(map: &NormalMap, canvas: &View) -> Vec<Option<[f64; 2]>> {
+    content_uv_unbounded(map, canvas)
+        .into_iter()
+        .map(|p| p.filter(|&uv| inside(uv)))
+        .collect()
+}
+
+pub fn inside([u, v]: [f64; 2]) -> bool {
+    (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)
+}
+
+/// [`content_uv`] continued past the canvas edges wherever the canvas projection still maps the
+/// direction (grids interpolate across the edge smoothly; alpha hides what lies outside).
+pub fn content_uv_unbounded(map: &NormalMap, canvas: &View) -> Vec<Option<[f64; 2]>> {
     let w = map.width();
     (0..w * map.height())
         .into_par_iter()
@@ -27,7 +45,7 @@ pub fn content_uv(map: &NormalMap, canvas: &View) -> Vec<Option<[f64; 2]>> {
             let v = map.direction(n % w, n / w)?;
             let (s, t) = canvas.screen(v).ok()?;
             let (x, y) = pixel_of_screen(s, t, 1, 1);
-            ((0.0..=1.0).contains(&x) && (0.0..=1.0).contains(&y)).then_some([x, y])
+            Some([x, y])
         })
         .collect()
 }
@@ -60,13 +78,8 @@ pub fn write_stmap(
     write_exr_rgba(path, &stmap(uv, width, height), &attrs, Precision::Float)
 }
 
-/// Writes a 3-channel PFM from rows given top to bottom.
-pub fn write_pfm(
-    path: &Path,
-    width: usize,
-    height: usize,
-    rows_top_down: &[[f32; 3]],
-) -> Result<()> {
+/// A 3-channel PFM (little-endian, rows bottom to top on disk) of rows given top to bottom.
+pub fn pfm_bytes(width: usize, height: usize, rows_top_down: &[[f32; 3]]) -> Result<Vec<u8>> {
     if rows_top_down.len() != width * height {
         return Err(Error::invalid(
             "pfm",
@@ -85,6 +98,16 @@ pub fn write_pfm(
             }
         }
     }
+    Ok(bytes)
+}
+
+pub fn write_pfm(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rows_top_down: &[[f32; 3]],
+) -> Result<()> {
+    let bytes = pfm_bytes(width, height, rows_top_down)?;
     atomic_write(path, |f| {
         f.write_all(&bytes).map_err(|e| Error::file(path, e))
     })
@@ -94,7 +117,12 @@ pub fn write_pfm(
 /// (a grey file repeats its one channel).
 pub fn read_pfm(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>)> {
     let bytes = std::fs::read(path).map_err(|e| Error::file(path, e))?;
-    let bad = |why: &str| Error::file(path, format!("not a PFM file: {why}"));
+    parse_pfm(&bytes, &path.display().to_string())
+}
+
+/// [`read_pfm`] of bytes in memory; `name` says where they came from in errors.
+pub fn parse_pfm(bytes: &[u8], name: &str) -> Result<(usize, usize, Vec<[f32; 3]>)> {
+    let bad = |why: &str| Error::invalid(name, format!("not a PFM file: {why}"));
     let mut fields = Vec::new();
     let mut at = 0;
     while fields.len() < 4 {
@@ -124,8 +152,11 @@ pub fn read_pfm(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>)> {
     let scale: f64 = fields[3]
         .parse()
         .map_err(|_| bad("the scale is not a number"))?;
-    let need = w * h * channels * 4;
-    if bytes.len() < at + need {
+    let need = w
+        .checked_mul(h)
+        .and_then(|n| n.checked_mul(channels * 4))
+        .ok_or_else(|| bad("the size overflows"))?;
+    if bytes.len() < at.saturating_add(need) {
         return Err(bad("the samples end early"));
     }
     let sample = |i: usize| {
@@ -182,18 +213,30 @@ pub fn write_remap_pgm(
         ));
     }
     for (path, axis, n) in [(xmap, 0, cw), (ymap, 1, ch)] {
-        let mut bytes = format!("P5\n{width} {height}\n65535\n").into_bytes();
-        for p in uv {
-            let v = p.map_or(65535u16, |q| {
-                ((q[axis] * f64::from(n) - 0.5)
-                    .round()
-                    .clamp(0.0, f64::from(n - 1))) as u16
-            });
-            bytes.extend_from_slice(&v.to_be_bytes());
-        }
+        let bytes = remap_pgm_bytes(uv, width, height, axis, n);
         atomic_write(path, |f| {
             f.write_all(&bytes).map_err(|e| Error::file(path, e))
         })?;
     }
     Ok(())
+}
+
+/// One ffmpeg `remap` map: content columns (`axis` 0) or rows (1) of an `n`-pixel axis as
+/// 16-bit PGM, nearest pixel, 65535 where unmapped.
+pub fn remap_pgm_bytes(
+    uv: &[Option<[f64; 2]>],
+    width: usize,
+    height: usize,
+    axis: usize,
+    n: u32,
+) -> Vec<u8> {
+    let n = f64::from(n.max(1));
+    let mut bytes = format!("P5\n{width} {height}\n65535\n").into_bytes();
+    for p in uv {
+        let v = p.map_or(65535u16, |q| {
+            (q[axis] * n - 0.5).round().clamp(0.0, n - 1.0) as u16
+        });
+        bytes.extend_from_slice(&v.to_be_bytes());
+    }
+    bytes
 }

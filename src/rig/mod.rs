@@ -171,10 +171,16 @@ impl Rig {
         let mut channels = Vec::with_capacity(doc.channels.len());
         for (n, c) in doc.channels.iter().enumerate() {
             let at = |f: &str| format!("/channels/{n}/{f}");
-            if c.id.is_empty() || c.id.contains(['/', '\\']) || c.id.starts_with('.') {
+            // Ids name files, URL segments and MPCDI regions: keep them to a safe alphabet.
+            let safe = |ch: char| ch.is_ascii_alphanumeric() || matches!(ch, '-' | '_' | '.');
+            if c.id.is_empty()
+                || c.id.len() > 64
+                || !c.id.chars().all(safe)
+                || c.id.starts_with('.')
+            {
                 return Err(Error::invalid(
                     at("id"),
-                    "must be a non-empty name usable as a file name",
+                    "must be 1–64 letters, digits, '-', '_' or '.', not starting with '.'",
                 ));
             }
             if doc.channels[..n].iter().any(|o| o.id == c.id) {
@@ -271,7 +277,7 @@ impl Rig {
 }
 
 /// serde_path_to_error's `channels[1].lens.model` as a JSON pointer `/channels/1/lens/model`.
-fn pointer_of(path: &str) -> String {
+pub fn pointer_of(path: &str) -> String {
     if path == "." || path.is_empty() {
         return "/".into();
     }

@@ -7,6 +7,7 @@ use crate::normalmap::NormalMap;
 use crate::raster::Raster;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A channel's warp: V per pixel (the warp map), and the wall point it lands on.
 #[derive(Debug, Clone)]
@@ -35,10 +36,20 @@ impl Rig {
     }
 
     pub fn warp(&self, ch: &Channel) -> ChannelWarp {
+        self.warp_unless(ch, &AtomicBool::new(false))
+            .expect("never cancelled")
+    }
+
+    /// [`Rig::warp`], given up (`None`) as soon as `cancel` is set — checked once per row, so a
+    /// client that goes away stops the work within a row's time.
+    pub fn warp_unless(&self, ch: &Channel, cancel: &AtomicBool) -> Option<ChannelWarp> {
         let (w, h) = (ch.width as usize, ch.height as usize);
         let mut points: Vec<Option<DVec3>> = vec![None; w * h];
         // Along a row each pixel's ray starts the next one's iterative unprojection.
         points.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
+            if cancel.load(Ordering::Relaxed) {
+                return;
+            }
             let mut guess = None;
             for (i, p) in row.iter_mut().enumerate() {
                 let ray = ch.lens.unproject_near([i as f64, j as f64], guess).ok();
@@ -51,6 +62,9 @@ impl Rig {
                 });
             }
         });
+        if cancel.load(Ordering::Relaxed) {
+            return None;
+        }
         let vector = |p: &Option<DVec3>| p.and_then(|p| self.sampling_vector(p));
         let map = Raster {
             width: w,
@@ -78,10 +92,10 @@ impl Rig {
             ("omniwarp.channel".to_string(), ch.id.clone()),
             ("omniwarp.projection".to_string(), "rig".to_string()),
         ];
-        ChannelWarp {
+        Some(ChannelWarp {
             map: NormalMap::from_pixels(map, attributes).expect("unit vectors and 0/1 validity"),
             wall,
             points,
-        }
+        })
     }
 }

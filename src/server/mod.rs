@@ -3,19 +3,25 @@
 //! Events), atomic persistence under the data directory, and a bearer token whenever the
 //! server listens beyond loopback. Every route is listed in [`router`] and in `api/openapi.yaml`.
 
+mod calib;
+mod channels;
+pub mod client;
 mod error;
+mod exports;
 mod outputs;
 mod state;
+mod store;
 
 pub use error::ApiError;
-pub use state::{AppState, Store};
+pub use state::AppState;
+pub use store::{Canvas, ChannelData, Store};
 
 use axum::Router;
 use axum::extract::{Request, State};
 use axum::http::header::AUTHORIZATION;
 use axum::middleware::{self, Next};
 use axum::response::Response;
-use axum::routing::get;
+use axum::routing::{get, post};
 use std::future::Future;
 use std::sync::Arc;
 use tokio::net::TcpListener;
@@ -27,9 +33,20 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/rig"),
     ("PUT", "/v1/rig"),
     ("GET", "/v1/channels"),
+    ("GET", "/v1/channels/{id}/content"),
+    ("PUT", "/v1/channels/{id}/content"),
+    ("GET", "/v1/channels/{id}/tiles"),
+    ("PUT", "/v1/channels/{id}/tiles"),
+    ("PATCH", "/v1/channels/{id}/tiles"),
+    ("DELETE", "/v1/channels/{id}/tiles"),
+    ("POST", "/v1/channels/{id}/calibration"),
+    ("GET", "/v1/proposals/{pid}"),
+    ("POST", "/v1/proposals/{pid}/apply"),
     ("GET", "/v1/channels/{id}/warp.exr"),
     ("GET", "/v1/channels/{id}/blend.png"),
-    ("GET", "/v1/channels/{id}/render.png"),
+    ("GET", "/v1/channels/{id}/render"),
+    ("GET", "/v1/channels/{id}/exports/{file}"),
+    ("GET", "/v1/export.mpcdi"),
     ("GET", "/v1/events"),
 ];
 
@@ -39,9 +56,28 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/version", get(state::version))
         .route("/v1/rig", get(state::get_rig).put(state::put_rig))
         .route("/v1/channels", get(state::channels))
+        .route(
+            "/v1/channels/{id}/content",
+            get(channels::get_content).put(channels::put_content),
+        )
+        .route(
+            "/v1/channels/{id}/tiles",
+            get(channels::get_tiles)
+                .put(channels::put_tiles)
+                .patch(channels::patch_tiles)
+                .delete(channels::delete_tiles),
+        )
+        .route("/v1/channels/{id}/calibration", post(calib::propose))
+        .route("/v1/proposals/{pid}", get(calib::get_proposal))
+        .route("/v1/proposals/{pid}/apply", post(calib::apply_proposal))
         .route("/v1/channels/{id}/warp.exr", get(outputs::warp))
         .route("/v1/channels/{id}/blend.png", get(outputs::blend))
-        .route("/v1/channels/{id}/render.png", get(outputs::render))
+        .route("/v1/channels/{id}/render", get(outputs::render))
+        .route(
+            "/v1/channels/{id}/exports/{file}",
+            get(exports::channel_export),
+        )
+        .route("/v1/export.mpcdi", get(exports::mpcdi_package))
         .route("/v1/events", get(state::events))
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .layer(axum::extract::DefaultBodyLimit::max(state::MAX_BODY))

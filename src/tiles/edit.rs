@@ -7,8 +7,10 @@ use super::raster::unwrap_deg;
 use super::{Feature, Layout, TileScreen};
 use crate::error::{Error, Result};
 
-/// One change to a tile screen.
-#[derive(Debug, Clone, PartialEq)]
+/// One change to a tile screen. As JSON (the daemon's PATCH), `"op"` names it in snake case:
+/// `{"op": "set_feature", "column": 3, "row": 0, "phi": 12.5}`; ranges are `[first, last]`.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Edit {
     /// Sets any of a grid feature's angles, scale and f (column k, row l).
     SetFeature {

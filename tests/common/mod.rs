@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod server;
+
 use omniwarp::content::{Content, Format};
 use omniwarp::image_io::{self, Loaded};
 use omniwarp::projection::{self, Params, View};

@@ -1,0 +1,90 @@
+//! Paul Bourke's warp mesh (`.data`, mesh type 2 = rectangular), as SGCT/OpenSpace, Celestia,
+//! Gaia Sky and Blender's dome mode read it: line 1 the type, line 2 `nx ny`, then nx·ny nodes
+//! `x y u v i`, bottom row first. x ∈ [−aspect, aspect] and y ∈ [−1, 1] place the node on the
+//! projector image (edges included, y up); u, v ∈ [0, 1] point into the content image with v = 0
+//! at its bottom (OpenGL texture coordinates); i is the node's intensity (the blend weight),
+//! negative where the node is not drawn.
+
+use super::grid::Grid;
+use crate::error::{Error, Result};
+use std::fmt::Write as _;
+
+/// A mesh as read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mesh {
+    pub kind: u32,
+    pub nx: usize,
+    pub ny: usize,
+    /// `[x, y, u, v, i]` per node, in file order (bottom row first).
+    pub nodes: Vec<[f64; 5]>,
+}
+
+/// The mesh text for a grid of content (u, v) (top-left origin) and the intensity
+/// at each node; `aspect` is the projector's width / height.
+pub fn mesh_text(uv: &Grid<2>, intensity: &[f64], aspect: f64) -> Result<String> {
+    if intensity.len() != uv.samples.len() {
+        return Err(Error::invalid("mesh", "one intensity per node is needed"));
+    }
+    let (nx, ny) = (uv.columns, uv.rows);
+    let mut out = String::with_capacity(nx * ny * 48 + 16);
+    let _ = write!(out, "2\n{nx} {ny}\n");
+    for row in (0..ny).rev() {
+        let y = 1.0 - 2.0 * row as f64 / (ny - 1) as f64;
+        for col in 0..nx {
+            let x = aspect * (2.0 * col as f64 / (nx - 1) as f64 - 1.0);
+            let n = row * nx + col;
+            let (u, v, i) = match uv.samples[n] {
+                Some([u, v]) => (u, 1.0 - v, intensity[n].clamp(0.0, 1.0)),
+                None => (0.0, 0.0, -1.0),
+            };
+            let _ = writeln!(out, "{x:.6} {y:.6} {u:.8} {v:.8} {i:.6}");
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a mesh (any whitespace between numbers), checking the node count.
+pub fn read_mesh(text: &str) -> Result<Mesh> {
+    let bad = |why: String| Error::invalid("mesh", why);
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let kind: u32 = lines
+        .next()
+        .and_then(|l| l.trim().parse().ok())
+        .ok_or_else(|| bad("line 1 must be the mesh type".into()))?;
+    let dims: Vec<usize> = lines
+        .next()
+        .map(|l| {
+            l.split_whitespace()
+                .filter_map(|t| t.parse().ok())
+                .collect()
+        })
+        .unwrap_or_default();
+    let [nx, ny] = dims[..] else {
+        return Err(bad("line 2 must be `nx ny`".into()));
+    };
+    let mut nodes = Vec::with_capacity(nx * ny);
+    for (n, line) in lines.enumerate() {
+        let v: Vec<f64> = line
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| bad(format!("node {n}: not five numbers")))?;
+        let node: [f64; 5] = v
+            .try_into()
+            .map_err(|_| bad(format!("node {n}: not five numbers")))?;
+        nodes.push(node);
+    }
+    if nodes.len() != nx * ny {
+        return Err(bad(format!(
+            "{nx}×{ny} needs {} nodes, found {}",
+            nx * ny,
+            nodes.len()
+        )));
+    }
+    Ok(Mesh {
+        kind,
+        nx,
+        ny,
+        nodes,
+    })
+}

@@ -1,0 +1,163 @@
+//! A channel's exports assembled from its warp: the per-pixel fields (content u, v; wall X, Y, Z
+//! from the eye), grids chosen from a tolerance, and the MPCDI region, Bourke mesh and PFMs built
+//! from them. Shared by the CLI and the daemon.
+
+use super::bourke;
+use super::grid::{self, Chosen};
+use super::mpcdi::{self, Profile, Region};
+use crate::error::{Error, Result};
+use crate::rig::{BlendOptions, blend_png_bytes};
+use glam::DVec3;
+
+/// What a channel's exports are made from.
+pub struct Sources<'a> {
+    pub id: &'a str,
+    pub width: usize,
+    pub height: usize,
+    /// Content (u, v), top-left origin, per pixel, continued past the canvas edges (see
+    /// [`super::content_uv_unbounded`]); only [0, 1]² is shown.
+    pub uv: &'a [Option<[f64; 2]>],
+    /// Content image size, pixels: the unit of 2d tolerances.
+    pub content_size: [u32; 2],
+    /// Wall points, metres, world frame.
+    pub points: &'a [Option<DVec3>],
+    pub eye: DVec3,
+    /// Linear blend weights per pixel.
+    pub weights: &'a [f32],
+}
+
+/// Tolerances: content pixels for 2d fields and meshes, millimetres on the wall for a3.
+#[derive(Debug, Clone, Copy)]
+pub struct Tolerance(pub f64);
+
+impl Tolerance {
+    pub fn checked(v: f64, name: &str) -> Result<Self> {
+        if v.is_finite() && v > 0.0 {
+            Ok(Tolerance(v))
+        } else {
+            Err(Error::invalid(
+                name,
+                format!("must be a positive number, got {v}"),
+            ))
+        }
+    }
+}
+
+impl Sources<'_> {
+    fn a3_field(&self) -> Vec<Option<[f64; 3]>> {
+        self.points
+            .iter()
+            .map(|p| p.map(|p| (p - self.eye).to_array()))
+            .collect()
+    }
+
+    fn uv_scale(&self) -> [f64; 2] {
+        [
+            f64::from(self.content_size[0]),
+            f64::from(self.content_size[1]),
+        ]
+    }
+
+    /// Content (x, y) grid of the 2d meaning: B = NaN (no error estimate), NaN where unknown;
+    /// samples past the canvas edge keep their (outside [0, 1]) coordinates, alpha hides them.
+    pub fn grid_2d(&self, tol: Tolerance) -> (Chosen<2>, Vec<[f32; 3]>) {
+        let c = grid::choose(self.uv, self.width, self.height, tol.0, self.uv_scale());
+        let rows = c
+            .grid
+            .samples
+            .iter()
+            .map(|s| match s {
+                Some([u, v]) => [*u as f32, *v as f32, f32::NAN],
+                None => [f32::NAN; 3],
+            })
+            .collect();
+        (c, rows)
+    }
+
+    /// Wall X, Y, Z grid of the a3 meaning, metres from the eye, NaN where unknown.
+    pub fn grid_a3(&self, tol: Tolerance) -> (Chosen<3>, Vec<[f32; 3]>) {
+        let c = grid::choose(
+            &self.a3_field(),
+            self.width,
+            self.height,
+            tol.0,
+            [1000.0; 3],
+        );
+        let rows = c
+            .grid
+            .samples
+            .iter()
+            .map(|s| match s {
+                Some(p) => p.map(|v| v as f32),
+                None => [f32::NAN; 3],
+            })
+            .collect();
+        (c, rows)
+    }
+
+    /// Alpha (blend weights), zero wherever the profile's field has no value, so players that
+    /// extrapolate NaN still show black there.
+    fn alpha_png(&self, profile: Profile) -> Result<Vec<u8>> {
+        let w: Vec<f32> = (0..self.weights.len())
+            .map(|n| {
+                let known = match profile {
+                    Profile::TwoD => self.uv[n].is_some_and(super::inside),
+                    Profile::A3 => self.points[n].is_some(),
+                };
+                if known { self.weights[n] } else { 0.0 }
+            })
+            .collect();
+        blend_png_bytes(
+            self.width as u32,
+            self.height as u32,
+            &w,
+            BlendOptions {
+                gamma: mpcdi::ALPHA_GAMMA,
+            },
+        )
+    }
+
+    /// The channel's MPCDI region and the worst interpolation error of its grid.
+    pub fn region(&self, profile: Profile, tol: Tolerance) -> Result<(Region, f64)> {
+        let (columns, rows, samples, err) = match profile {
+            Profile::TwoD => {
+                let (c, s) = self.grid_2d(tol);
+                (c.grid.columns, c.grid.rows, s, c.max_error)
+            }
+            Profile::A3 => {
+                let (c, s) = self.grid_a3(tol);
+                (c.grid.columns, c.grid.rows, s, c.max_error)
+            }
+        };
+        Ok((
+            Region {
+                id: self.id.to_string(),
+                resolution: [self.width as u32, self.height as u32],
+                warp: (columns, rows, samples),
+                alpha_png: self.alpha_png(profile)?,
+            },
+            err,
+        ))
+    }
+
+    /// Paul Bourke mesh text with its grid, intensity = blend weight.
+    pub fn bourke(&self, tol: Tolerance) -> Result<(String, Chosen<2>)> {
+        let c = grid::choose(self.uv, self.width, self.height, tol.0, self.uv_scale());
+        let weights: Vec<Option<[f64; 1]>> =
+            self.weights.iter().map(|w| Some([f64::from(*w)])).collect();
+        let wgrid = grid::sample(
+            &weights,
+            self.width,
+            self.height,
+            c.grid.columns,
+            c.grid.rows,
+        );
+        let intensity: Vec<f64> = wgrid
+            .samples
+            .iter()
+            .map(|s| s.map_or(0.0, |v| v[0]))
+            .collect();
+        let text = bourke::mesh_text(&c.grid, &intensity, self.width as f64 / self.height as f64)?;
+        Ok((text, c))
+    }
+}

@@ -1,0 +1,311 @@
+//! Warp grids for media servers: a per-pixel field (content u, v or wall X, Y, Z) sampled on a
+//! uniform grid the reader interpolates bilinearly, with the grid's density chosen from an error
+//! tolerance rather than fixed.
+//!
+//! The samples fill the image edge to edge: the first and last of a row lie on the image's left
+//! and right edges (normalised position i / (n − 1)), as MPCDI readers (nDisplay builds its mesh
+//! with UV = i / (n − 1)) and Paul Bourke's meshes place them. A reader interpolating between
+//! cell centres instead would have to clamp half a cell at every border. Positions below are in
+//! pixel-centre coordinates, pixel (0, 0)'s centre at (0, 0), as lens models and tile screens
+//! count them, so sample 0 sits at −½.
+
+use rayon::prelude::*;
+
+/// A uniform grid of samples, row-major from the top row; `None` where the field has none.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid<const N: usize> {
+    pub columns: usize,
+    pub rows: usize,
+    pub samples: Vec<Option<[f64; N]>>,
+}
+
+/// Pixel-centre position of sample `i` of `n` across an image `size` pixels wide.
+pub fn position(i: usize, n: usize, size: usize) -> f64 {
+    i as f64 * size as f64 / (n - 1) as f64 - 0.5
+}
+
+/// Inverse of [`position`]: the (fractional) sample index at pixel-centre coordinate `p`.
+fn index(p: f64, n: usize, size: usize) -> f64 {
+    (p + 0.5) * (n - 1) as f64 / size as f64
+}
+
+/// Bilinear weights and the four corner indices around fractional index (gx, gy) of a
+/// columns × rows lattice, clamped to it.
+fn corners(gx: f64, gy: f64, columns: usize, rows: usize) -> ([usize; 4], [f64; 4]) {
+    let gx = gx.clamp(0.0, (columns - 1) as f64);
+    let gy = gy.clamp(0.0, (rows - 1) as f64);
+    let (x0, y0) = (
+        (gx.floor() as usize).min(columns.saturating_sub(2)),
+        (gy.floor() as usize).min(rows.saturating_sub(2)),
+    );
+    let (x1, y1) = ((x0 + 1).min(columns - 1), (y0 + 1).min(rows - 1));
+    let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+    (
+        [
+            y0 * columns + x0,
+            y0 * columns + x1,
+            y1 * columns + x0,
+            y1 * columns + x1,
+        ],
+        [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ],
+    )
+}
+
+/// Bilinear interpolation of `values` (a columns × rows lattice) at (gx, gy); `None` when a
+/// corner that carries weight has no value — a reader would blend into an invalid sample there.
+fn interpolate<const N: usize>(
+    values: &[Option<[f64; N]>],
+    columns: usize,
+    rows: usize,
+    gx: f64,
+    gy: f64,
+) -> Option<[f64; N]> {
+    let (idx, wt) = corners(gx, gy, columns, rows);
+    let mut out = [0.0; N];
+    for (i, w) in idx.into_iter().zip(wt) {
+        if w == 0.0 {
+            continue;
+        }
+        let v = values[i]?;
+        for c in 0..N {
+            out[c] += w * v[c];
+        }
+    }
+    Some(out)
+}
+
+/// Samples a width × height field on a columns × rows grid.
+///
+/// A node between valid pixels is interpolated bilinearly; one next to an invalid pixel is
+/// extrapolated (first order) from the nearest valid pixel within a cell's reach, so that a
+/// reader interpolating the grid covers every valid pixel up to the field's edge (the
+/// extrapolation error counts like any other and refines the grid when too large). Only nodes
+/// with no valid pixel within a cell stay `None`; the alpha mask is zero around them.
+pub fn sample<const N: usize>(
+    field: &[Option<[f64; N]>],
+    width: usize,
+    height: usize,
+    columns: usize,
+    rows: usize,
+) -> Grid<N> {
+    let reach_x = (width as f64 / (columns.max(2) - 1) as f64).ceil() as isize;
+    let reach_y = (height as f64 / (rows.max(2) - 1) as f64).ceil() as isize;
+    let samples = (0..columns * rows)
+        .into_par_iter()
+        .map(|n| {
+            let x = position(n % columns, columns, width);
+            let y = position(n / columns, rows, height);
+            // Nodes on the image's outer edges lie half a pixel beyond the outermost centres:
+            // extrapolate there too rather than let interpolation clamp.
+            let within =
+                (0.0..=(width - 1) as f64).contains(&x) && (0.0..=(height - 1) as f64).contains(&y);
+            within
+                .then(|| interpolate(field, width, height, x, y))
+                .flatten()
+                .or_else(|| nearest_valid(field, width, height, x, y, reach_x, reach_y))
+        })
+        .collect();
+    Grid {
+        columns,
+        rows,
+        samples,
+    }
+}
+
+/// A first-order extrapolation to (x, y) from the valid pixel nearest it within ±reach pixels:
+/// its value plus the field's gradient there (central differences where both neighbours are
+/// valid, one-sided where one is), times the offset.
+fn nearest_valid<const N: usize>(
+    field: &[Option<[f64; N]>],
+    width: usize,
+    height: usize,
+    x: f64,
+    y: f64,
+    reach_x: isize,
+    reach_y: isize,
+) -> Option<[f64; N]> {
+    let (cx, cy) = (x.round() as isize, y.round() as isize);
+    let mut best: Option<(f64, usize, usize)> = None;
+    for j in (cy - reach_y).max(0)..=(cy + reach_y).min(height as isize - 1) {
+        for i in (cx - reach_x).max(0)..=(cx + reach_x).min(width as isize - 1) {
+            if field[j as usize * width + i as usize].is_some() {
+                let d = (i as f64 - x).powi(2) + (j as f64 - y).powi(2);
+                if best.is_none_or(|(b, _, _)| d < b) {
+                    best = Some((d, i as usize, j as usize));
+                }
+            }
+        }
+    }
+    let (_, i, j) = best?;
+    let at = |i: usize, j: usize| field[j * width + i];
+    let v = at(i, j)?;
+    let slope = |lo: Option<[f64; N]>, hi: Option<[f64; N]>| -> [f64; N] {
+        let mut d = [0.0; N];
+        match (lo, hi) {
+            (Some(a), Some(b)) => (0..N).for_each(|c| d[c] = (b[c] - a[c]) / 2.0),
+            (Some(a), None) => (0..N).for_each(|c| d[c] = v[c] - a[c]),
+            (None, Some(b)) => (0..N).for_each(|c| d[c] = b[c] - v[c]),
+            (None, None) => {}
+        }
+        d
+    };
+    let gx = slope(
+        i.checked_sub(1).and_then(|i| at(i, j)),
+        (i + 1 < width).then(|| at(i + 1, j)).flatten(),
+    );
+    let gy = slope(
+        j.checked_sub(1).and_then(|j| at(i, j)),
+        (j + 1 < height).then(|| at(i, j + 1)).flatten(),
+    );
+    let (dx, dy) = (x - i as f64, y - j as f64);
+    let mut out = v;
+    for c in 0..N {
+        out[c] += gx[c] * dx + gy[c] * dy;
+    }
+    Some(out)
+}
+
+impl<const N: usize> Grid<N> {
+    /// What a reader interpolating this grid shows at pixel (i, j).
+    pub fn at_pixel(&self, i: usize, j: usize, width: usize, height: usize) -> Option<[f64; N]> {
+        let gx = index(i as f64, self.columns, width);
+        let gy = index(j as f64, self.rows, height);
+        interpolate(&self.samples, self.columns, self.rows, gx, gy)
+    }
+
+    /// Largest distance between what a reader interpolates and the field over the field's valid
+    /// pixels (infinite if the grid leaves one uncovered); components are multiplied by `scale`
+    /// first (content pixels per unit, millimetres per metre).
+    pub fn max_error(
+        &self,
+        field: &[Option<[f64; N]>],
+        width: usize,
+        height: usize,
+        scale: [f64; N],
+    ) -> f64 {
+        (0..height)
+            .into_par_iter()
+            .map(|j| {
+                let mut worst = 0.0f64;
+                for i in 0..width {
+                    let Some(exact) = field[j * width + i] else {
+                        continue;
+                    };
+                    let Some(got) = self.at_pixel(i, j, width, height) else {
+                        return f64::INFINITY;
+                    };
+                    let d2: f64 = (0..N)
+                        .map(|c| ((got[c] - exact[c]) * scale[c]).powi(2))
+                        .sum();
+                    worst = worst.max(d2.sqrt());
+                }
+                worst
+            })
+            .reduce(|| 0.0, f64::max)
+    }
+}
+
+/// The chosen grid and its measured worst error.
+#[derive(Debug, Clone)]
+pub struct Chosen<const N: usize> {
+    pub grid: Grid<N>,
+    pub max_error: f64,
+}
+
+/// The coarsest grid (columns growing by about √2 per step, rows keeping the image's aspect)
+/// whose worst interpolation error is within `tolerance`; one sample per pixel corner when none
+/// is.
+pub fn choose<const N: usize>(
+    field: &[Option<[f64; N]>],
+    width: usize,
+    height: usize,
+    tolerance: f64,
+    scale: [f64; N],
+) -> Chosen<N> {
+    let mut columns = 2usize;
+    while columns < width {
+        let rows = ((columns as f64 * height as f64 / width as f64).round() as usize).max(2);
+        let grid = sample(field, width, height, columns, rows);
+        let max_error = grid.max_error(field, width, height, scale);
+        if max_error <= tolerance {
+            return Chosen { grid, max_error };
+        }
+        columns = ((columns as f64 * std::f64::consts::SQRT_2).ceil() as usize).max(columns + 1);
+    }
+    let grid = sample(field, width, height, width + 1, height + 1);
+    let max_error = grid.max_error(field, width, height, scale);
+    Chosen { grid, max_error }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A projective field (a plane seen in perspective) with an invalid corner region.
+    fn field(w: usize, h: usize) -> Vec<Option<[f64; 2]>> {
+        (0..w * h)
+            .map(|n| {
+                let (x, y) = ((n % w) as f64, (n / w) as f64);
+                let d = 1.0 + 0.002 * x + 0.001 * y;
+                (x + 2.0 * y > 40.0).then_some([(3.0 * x + 10.0) / d, (2.0 * y - x) / d])
+            })
+            .collect()
+    }
+
+    /// A reader written independently: normalised position u = (p + ½) / size, sample index
+    /// u · (n − 1), bilinear between samples.
+    fn read(g: &Grid<2>, w: usize, h: usize, i: usize, j: usize) -> Option<[f64; 2]> {
+        let to = |p: f64, n: usize, size: usize| (p + 0.5) / size as f64 * (n - 1) as f64;
+        let (gx, gy) = (to(i as f64, g.columns, w), to(j as f64, g.rows, h));
+        let (x0, y0) = (gx.floor() as usize, gy.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(g.columns - 1), (y0 + 1).min(g.rows - 1));
+        let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+        let mut out = [0.0; 2];
+        for (x, y, wt) in [
+            (x0, y0, (1.0 - fx) * (1.0 - fy)),
+            (x1, y0, fx * (1.0 - fy)),
+            (x0, y1, (1.0 - fx) * fy),
+            (x1, y1, fx * fy),
+        ] {
+            if wt > 0.0 {
+                let v = g.samples[y * g.columns + x]?;
+                out[0] += wt * v[0];
+                out[1] += wt * v[1];
+            }
+        }
+        Some(out)
+    }
+
+    #[test]
+    fn chosen_grids_meet_the_tolerance_as_an_independent_reader_sees_them() {
+        let (w, h) = (160, 90);
+        let f = field(w, h);
+        let mut columns = Vec::new();
+        for tol in [0.05, 0.2, 1.0] {
+            let c = choose(&f, w, h, tol, [1.0, 1.0]);
+            assert!(c.max_error <= tol, "{tol}: {}", c.max_error);
+            let mut worst = 0.0f64;
+            for j in 0..h {
+                for i in 0..w {
+                    if let Some(e) = f[j * w + i] {
+                        let got = read(&c.grid, w, h, i, j).expect("every valid pixel covered");
+                        worst = worst.max((got[0] - e[0]).hypot(got[1] - e[1]));
+                    }
+                }
+            }
+            assert!(
+                (worst - c.max_error).abs() < 1e-9,
+                "{tol}: {worst} vs {}",
+                c.max_error
+            );
+            assert!(c.grid.columns < w / 2, "{tol}: {} columns", c.grid.columns);
+            columns.push(c.grid.columns);
+        }
+        assert!(columns.windows(2).all(|p| p[1] < p[0]), "{columns:?}");
+    }
+}

@@ -1,0 +1,313 @@
+//! MPCDI packages (VESA): a ZIP with `mpcdi.xml` and, per region, a warp PFM and an alpha PNG,
+//! every member at the root. One buffer holds the projectors side by side, one region each
+//! (nDisplay makes a viewport of every region).
+//!
+//! The spelling follows the reference reader (tinyxml2, case-sensitive), not the spec's:
+//! `Xresolution`, `Yresolution`, `xsize`, `ysize`, `originof3DData`, and `level` is written in
+//! v2.0 files too. The reader here accepts any letter case.
+
+use crate::error::{Error, Result};
+use std::io::{Cursor, Read, Write};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Profile {
+    /// Normalised content (x, y) per sample (top-left origin), B = NaN (no error estimate).
+    TwoD,
+    /// Wall X, Y, Z per sample, metres, origin at the ideal eye point.
+    A3,
+}
+
+impl Profile {
+    pub fn name(self) -> &'static str {
+        match self {
+            Profile::TwoD => "2d",
+            Profile::A3 => "a3",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Version {
+    V1,
+    V2,
+}
+
+/// One projector's region as written.
+#[derive(Debug, Clone)]
+pub struct Region {
+    pub id: String,
+    pub resolution: [u32; 2],
+    /// Warp grid size and samples, rows top to bottom (NaN where unknown).
+    pub warp: (usize, usize, Vec<[f32; 3]>),
+    /// 16-bit grey alpha map at the projector resolution, gamma 2.2 embedded.
+    pub alpha_png: Vec<u8>,
+}
+
+/// Gamma baked into the alpha maps we write.
+pub const ALPHA_GAMMA: f64 = 2.2;
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('"', "&quot;")
+        .replace('>', "&gt;")
+}
+
+/// `yyyy-MM-dd HH:mm:ss` (UTC) of a Unix time.
+fn date(unix: u64) -> String {
+    let (days, secs) = ((unix / 86400) as i64, unix % 86400);
+    // Howard Hinnant's civil-from-days.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02} {:02}:{:02}:{:02}",
+        secs / 3600,
+        secs / 60 % 60,
+        secs % 60
+    )
+}
+
+/// The `mpcdi.xml` of a package.
+pub fn xml(version: Version, profile: Profile, regions: &[Region], unix_time: u64) -> String {
+    let total_w: u32 = regions.iter().map(|r| r.resolution[0]).sum();
+    let max_h = regions.iter().map(|r| r.resolution[1]).max().unwrap_or(0);
+    let root = match version {
+        Version::V1 => format!(
+            r#"<MPCDI profile="{}" level="1" date="{}" version="1.0">"#,
+            profile.name(),
+            date(unix_time)
+        ),
+        Version::V2 => format!(
+            r#"<MPCDI profile="{}" geometry="1" color="1" level="1" date="{}" version="2.0">"#,
+            profile.name(),
+            date(unix_time)
+        ),
+    };
+    let mut x = String::from("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n");
+    x += &root;
+    x += &format!(
+        "\n  <display>\n    <buffer id=\"buffer0\" Xresolution=\"{total_w}\" Yresolution=\"{max_h}\">\n"
+    );
+    let mut left = 0u32;
+    for r in regions {
+        let [w, h] = r.resolution;
+        x += &format!(
+            "      <region id=\"{}\" x=\"{:.9}\" y=\"0\" xsize=\"{:.9}\" ysize=\"{:.9}\" Xresolution=\"{w}\" Yresolution=\"{h}\"/>\n",
+            escape(&r.id),
+            f64::from(left) / f64::from(total_w),
+            f64::from(w) / f64::from(total_w),
+            f64::from(h) / f64::from(max_h)
+        );
+        left += w;
+    }
+    x += "    </buffer>\n  </display>\n  <files>\n";
+    for r in regions {
+        let id = escape(&r.id);
+        x += &format!(
+            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>m</geometricUnit>\n        <originof3DData>idealEyePoint</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>16</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n    </fileset>\n"
+        );
+    }
+    x += "  </files>\n</MPCDI>\n";
+    x
+}
+
+/// The package's bytes.
+pub fn package(
+    version: Version,
+    profile: Profile,
+    regions: &[Region],
+    unix_time: u64,
+) -> Result<Vec<u8>> {
+    let zip_err = |e: zip::result::ZipError| Error::invalid("mpcdi", e.to_string());
+    let io_err = |e: std::io::Error| Error::invalid("mpcdi", e.to_string());
+    let mut z = zip::ZipWriter::new(Cursor::new(Vec::new()));
+    let opts = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    z.start_file("mpcdi.xml", opts).map_err(zip_err)?;
+    z.write_all(xml(version, profile, regions, unix_time).as_bytes())
+        .map_err(io_err)?;
+    for r in regions {
+        let (gw, gh, samples) = &r.warp;
+        z.start_file(format!("GeometryWarpFile-{}.pfm", r.id), opts)
+            .map_err(zip_err)?;
+        z.write_all(&super::pfm_bytes(*gw, *gh, samples)?)
+            .map_err(io_err)?;
+        z.start_file(format!("AlphaMap-{}.png", r.id), opts)
+            .map_err(zip_err)?;
+        z.write_all(&r.alpha_png).map_err(io_err)?;
+    }
+    Ok(z.finish().map_err(zip_err)?.into_inner())
+}
+
+/// A package as read back.
+#[derive(Debug, Clone)]
+pub struct Package {
+    /// The root element's attributes as written (any case), e.g. `version`, `profile`, `level`.
+    pub root: Vec<(String, String)>,
+    pub xml: String,
+    pub buffers: Vec<BufferRead>,
+}
+
+#[derive(Debug, Clone)]
+pub struct BufferRead {
+    pub id: String,
+    pub resolution: [u32; 2],
+    pub regions: Vec<RegionRead>,
+}
+
+#[derive(Debug, Clone)]
+pub struct RegionRead {
+    pub id: String,
+    /// x, y, xsize, ysize, normalised to the buffer.
+    pub rect: [f64; 4],
+    pub resolution: [u32; 2],
+    pub interpolation: String,
+    pub geometric_unit: String,
+    pub origin_of_3d_data: String,
+    pub warp: (usize, usize, Vec<[f32; 3]>),
+    /// Alpha in 0–1 as stored (gamma embedded), row-major.
+    pub alpha: (u32, u32, Vec<f64>),
+    pub gamma_embedded: f64,
+}
+
+impl Package {
+    pub fn attr(&self, name: &str) -> Option<&str> {
+        self.root
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(name))
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+fn attr<'a>(n: roxmltree::Node<'a, '_>, name: &str) -> Option<&'a str> {
+    n.attributes()
+        .find(|a| a.name().eq_ignore_ascii_case(name))
+        .map(|a| a.value())
+}
+
+fn child<'a, 'i>(n: roxmltree::Node<'a, 'i>, name: &str) -> Option<roxmltree::Node<'a, 'i>> {
+    n.children()
+        .find(|c| c.is_element() && c.tag_name().name().eq_ignore_ascii_case(name))
+}
+
+fn children<'a, 'i>(
+    n: roxmltree::Node<'a, 'i>,
+    name: &'static str,
+) -> impl Iterator<Item = roxmltree::Node<'a, 'i>> {
+    n.children()
+        .filter(move |c| c.is_element() && c.tag_name().name().eq_ignore_ascii_case(name))
+}
+
+/// Reads a package, accepting any spelling case of the names.
+pub fn read(bytes: &[u8]) -> Result<Package> {
+    let bad = |why: String| Error::invalid("mpcdi", why);
+    let mut z = zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| bad(e.to_string()))?;
+    let mut member = |name: &str| -> Result<Vec<u8>> {
+        let mut f = z
+            .by_name(name)
+            .map_err(|e| bad(format!("member `{name}`: {e}")))?;
+        let mut out = Vec::new();
+        f.read_to_end(&mut out)
+            .map_err(|e| bad(format!("member `{name}`: {e}")))?;
+        Ok(out)
+    };
+    let xml = String::from_utf8(member("mpcdi.xml")?)
+        .map_err(|_| bad("mpcdi.xml is not UTF-8".into()))?;
+    let doc = roxmltree::Document::parse(&xml).map_err(|e| bad(format!("mpcdi.xml: {e}")))?;
+    let root = doc.root_element();
+    if !root.tag_name().name().eq_ignore_ascii_case("MPCDI") {
+        return Err(bad("the root element is not MPCDI".into()));
+    }
+    let num = |n: roxmltree::Node, name: &str| -> Result<f64> {
+        attr(n, name)
+            .and_then(|v| v.trim().parse().ok())
+            .ok_or_else(|| {
+                bad(format!(
+                    "<{}> lacks a numeric `{name}`",
+                    n.tag_name().name()
+                ))
+            })
+    };
+    let text = |n: roxmltree::Node, name: &str| -> String {
+        child(n, name)
+            .and_then(|c| c.text())
+            .map(|t| t.trim().to_string())
+            .unwrap_or_default()
+    };
+    let files = child(root, "files").ok_or_else(|| bad("no <files>".into()))?;
+    let mut buffers = Vec::new();
+    for display in children(root, "display") {
+        for b in children(display, "buffer") {
+            let mut regions = Vec::new();
+            for r in children(b, "region") {
+                let id = attr(r, "id")
+                    .ok_or_else(|| bad("a region without an id".into()))?
+                    .to_string();
+                let fileset = children(files, "fileset")
+                    .find(|f| attr(*f, "region") == Some(id.as_str()))
+                    .ok_or_else(|| bad(format!("no fileset for region `{id}`")))?;
+                let warp_node = child(fileset, "geometryWarpFile")
+                    .ok_or_else(|| bad(format!("region `{id}`: no geometryWarpFile")))?;
+                let warp_path = text(warp_node, "path");
+                let warp = super::parse_pfm(&member(&warp_path)?, &warp_path)?;
+                let alpha_node = child(fileset, "alphaMap")
+                    .ok_or_else(|| bad(format!("region `{id}`: no alphaMap")))?;
+                let alpha_path = text(alpha_node, "path");
+                let img = image::load_from_memory(&member(&alpha_path)?)
+                    .map_err(|e| bad(format!("{alpha_path}: {e}")))?
+                    .into_luma16();
+                let alpha = (
+                    img.width(),
+                    img.height(),
+                    img.pixels().map(|p| f64::from(p.0[0]) / 65535.0).collect(),
+                );
+                regions.push(RegionRead {
+                    rect: [
+                        num(r, "x")?,
+                        num(r, "y")?,
+                        num(r, "xsize")?,
+                        num(r, "ysize")?,
+                    ],
+                    resolution: [num(r, "xresolution")? as u32, num(r, "yresolution")? as u32],
+                    interpolation: text(warp_node, "interpolation"),
+                    geometric_unit: text(warp_node, "geometricUnit"),
+                    origin_of_3d_data: text(warp_node, "originOf3DData"),
+                    gamma_embedded: text(alpha_node, "gammaEmbedded").parse().unwrap_or(1.0),
+                    warp,
+                    alpha,
+                    id,
+                });
+            }
+            buffers.push(BufferRead {
+                id: attr(b, "id").unwrap_or_default().to_string(),
+                resolution: [num(b, "xresolution")? as u32, num(b, "yresolution")? as u32],
+                regions,
+            });
+        }
+    }
+    Ok(Package {
+        root: root
+            .attributes()
+            .map(|a| (a.name().to_string(), a.value().to_string()))
+            .collect(),
+        xml: xml.clone(),
+        buffers,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn dates_are_civil() {
+        assert_eq!(super::date(0), "1970-01-01 00:00:00");
+        assert_eq!(super::date(951_782_400), "2000-02-29 00:00:00");
+        assert_eq!(super::date(1_795_312_861), "2026-11-22 02:01:01");
+    }
+}

@@ -1,0 +1,159 @@
+//! Calibration over HTTP: correspondences measured on the wall go in, a solved projector comes
+//! back as a proposal (kept durably, announced on the change feed), and the technician applies
+//! it to the rig with `If-Match` like any other rig edit.
+
+use super::ApiError;
+use super::outputs::run_job;
+use super::state::{AppState, commit_rig, if_match, parse_body, tagged};
+use super::store::Proposal;
+use crate::calibration::{Correspondence, ModelChoice, Problem, calibrate};
+use crate::lens::Lens;
+use crate::rig::{LensDoc, Rig};
+use axum::body::Bytes;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use std::sync::Arc;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationBody {
+    points: Vec<Correspondence>,
+    /// `auto` (PINHOLE → OPENCV4 → 5 → 8 while held-out residuals improve) or a model name.
+    #[serde(default)]
+    model: Option<String>,
+    /// Known intrinsics (kept with `intrinsics_fixed`) or a seed.
+    #[serde(default)]
+    lens: Option<LensDoc>,
+    #[serde(default)]
+    intrinsics_fixed: bool,
+}
+
+fn invalid(field: &str, e: crate::Error) -> ApiError {
+    ApiError::Invalid {
+        field: field.into(),
+        reason: e.reason(),
+    }
+}
+
+pub async fn propose(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let b: CalibrationBody = parse_body(&body)?;
+    let (rig, rig_revision) = s.store.snapshot();
+    let ch = rig
+        .channel(&id)
+        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?;
+    let lens = match &b.lens {
+        Some(l) => {
+            let model = l.model.parse().map_err(|e| invalid("/lens/model", e))?;
+            Some(
+                Lens::new(model, l.intrinsics.clone())
+                    .map_err(|e| invalid("/lens/intrinsics", e))?,
+            )
+        }
+        None => None,
+    };
+    let choice = match b.model.as_deref().unwrap_or("auto") {
+        "auto" => ModelChoice::Auto,
+        m => ModelChoice::Fixed(m.parse().map_err(|e| invalid("/model", e))?),
+    };
+    let problem = Problem {
+        resolution: [ch.width, ch.height],
+        points: b.points,
+        lens,
+        intrinsics_fixed: b.intrinsics_fixed,
+    };
+    let resolution = [ch.width, ch.height];
+    let cal = run_job(&s, move |_| {
+        Some(calibrate(&problem, choice).map_err(|e| match e {
+            crate::Error::Invalid { name, reason } => ApiError::Invalid {
+                field: format!("/{}", name.replace(['[', '.'], "/").replace(']', "")),
+                reason,
+            },
+            other => ApiError::Internal(other.to_string()),
+        }))
+    })
+    .await??;
+    let pid = s
+        .store
+        .next_proposal
+        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let proposal = Proposal {
+        id: pid,
+        channel: id.clone(),
+        rig_revision,
+        proposed: cal.channel_doc(&id, resolution),
+        rms: cal.fit.rms,
+        considered: cal
+            .considered
+            .iter()
+            .map(|c| {
+                serde_json::json!({"model": c.model.to_string(), "rms": c.rms,
+                    "held_out_rms": c.held_out_rms, "verdict": c.verdict})
+            })
+            .collect(),
+        sigma: cal.fit.sigma.clone(),
+        warnings: cal.warnings.clone(),
+    };
+    let (state, copy) = (s.clone(), proposal.clone());
+    tokio::task::spawn_blocking(move || state.store.save_proposal(&copy))
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))??;
+    s.store
+        .proposals
+        .lock()
+        .expect("proposal lock")
+        .insert(pid, Arc::new(proposal.clone()));
+    s.announce(serde_json::json!({"kind": "proposal", "channel": id, "id": pid}));
+    Ok((
+        StatusCode::CREATED,
+        axum::Json(serde_json::to_value(&proposal).expect("proposals serialise")),
+    )
+        .into_response())
+}
+
+fn find(s: &AppState, pid: u64) -> Result<Arc<Proposal>, ApiError> {
+    s.store
+        .proposals
+        .lock()
+        .expect("proposal lock")
+        .get(&pid)
+        .cloned()
+        .ok_or_else(|| ApiError::NotFound(format!("no proposal {pid}")))
+}
+
+pub async fn get_proposal(
+    State(s): State<Arc<AppState>>,
+    Path(pid): Path<u64>,
+) -> Result<Response, ApiError> {
+    let p = find(&s, pid)?;
+    Ok(axum::Json(serde_json::to_value(&*p).expect("proposals serialise")).into_response())
+}
+
+/// Replaces the proposal's channel (lens, pose, resolution) in the rig; `If-Match` is the rig
+/// revision.
+pub async fn apply_proposal(
+    State(s): State<Arc<AppState>>,
+    Path(pid): Path<u64>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    let p = find(&s, pid)?;
+    let (rig, _) = s.store.snapshot();
+    let mut doc = rig.doc.clone();
+    let slot = doc
+        .channels
+        .iter_mut()
+        .find(|c| c.id == p.channel)
+        .ok_or_else(|| {
+            ApiError::NotFound(format!("the rig has no channel `{}` any more", p.channel))
+        })?;
+    *slot = p.proposed.clone();
+    let next = Rig::from_doc(doc)?;
+    let revision = commit_rig(&s, wanted, next).await?;
+    Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}

@@ -1,0 +1,249 @@
+//! Per-channel editable resources: the content canvas and the tile screen, each with its own
+//! revision (`ETag`, `If-Match`, 412 with the current one when stale).
+
+use super::ApiError;
+use super::state::{AppState, if_match, parse_body, tagged};
+use super::store::{Canvas, ChannelData, Versioned};
+use crate::rig::{Channel, Rig};
+use crate::tiles::TileScreen;
+use crate::tiles::build::grid_of;
+use crate::tiles::edit::Edit;
+use axum::body::Bytes;
+use axum::extract::{Path, State};
+use axum::http::HeaderMap;
+use axum::response::Response;
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// Columns of a tile screen sampled from the geometry (rows follow the aspect ratio).
+const SAMPLED_COLUMNS: usize = 33;
+
+fn not_found(id: &str) -> ApiError {
+    ApiError::NotFound(format!("no channel `{id}`"))
+}
+
+/// The channel's geometric warp as a tile screen: feature (x, y) shows the content direction of
+/// the projector pixel at (x·W − ½, y·H − ½), i.e. the grid runs from image edge to image edge.
+pub fn sample_geometry(
+    rig: &Rig,
+    ch: &Channel,
+    columns: usize,
+    rows: usize,
+) -> crate::Result<TileScreen> {
+    let (w, h) = (f64::from(ch.width), f64::from(ch.height));
+    grid_of(columns, rows, |s, t| {
+        let q = [(s + 1.0) / 2.0 * w - 0.5, (1.0 - t) / 2.0 * h - 0.5];
+        let v = rig.wall_point(ch, q).and_then(|p| rig.sampling_vector(p));
+        (v, 1.0)
+    })
+}
+
+fn sampled_rows(ch: &Channel) -> usize {
+    let r = (SAMPLED_COLUMNS - 1) as f64 * f64::from(ch.height) / f64::from(ch.width);
+    (r.round() as usize + 1).max(2)
+}
+
+async fn data(
+    s: &Arc<AppState>,
+    id: &str,
+) -> Result<Arc<tokio::sync::Mutex<ChannelData>>, ApiError> {
+    s.store.channel(id).ok_or_else(|| not_found(id))
+}
+
+/// 412 unless the edit is based on the current revision.
+fn fresh(current: u64, wanted: u64) -> Result<(), ApiError> {
+    if current == wanted {
+        Ok(())
+    } else {
+        Err(ApiError::Stale { current })
+    }
+}
+
+/// Replaces a channel's state with `next` after it is durable, then announces `kind`.
+async fn commit(
+    s: &Arc<AppState>,
+    id: &str,
+    held: &mut ChannelData,
+    next: ChannelData,
+    kind: &str,
+    revision: u64,
+) -> Result<(), ApiError> {
+    let (state, id2, copy) = (s.clone(), id.to_string(), next.clone());
+    tokio::task::spawn_blocking(move || state.store.save_channel(&id2, &copy))
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))??;
+    *held = next;
+    if kind == "tiles" {
+        s.computed
+            .lock()
+            .expect("cache lock")
+            .retain(|k, _| !(k.0 == id && k.2 != revision));
+    }
+    s.announce(serde_json::json!({"kind": kind, "channel": id, "revision": revision}));
+    Ok(())
+}
+
+pub async fn get_content(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let d = data(&s, &id).await?;
+    let g = d.lock().await;
+    Ok(tagged(
+        serde_json::json!({"revision": g.content.revision, "content": g.content.value}),
+        g.content.revision,
+    ))
+}
+
+pub async fn put_content(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    let canvas: Canvas = parse_body(&body)?;
+    canvas.view()?;
+    let d = data(&s, &id).await?;
+    let mut g = d.lock().await;
+    fresh(g.content.revision, wanted)?;
+    let revision = wanted + 1;
+    let mut next = g.clone();
+    next.content = Versioned {
+        revision,
+        value: canvas,
+    };
+    commit(&s, &id, &mut g, next, "content", revision).await?;
+    Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}
+
+/// The tile screen a channel shows: its edited one, or its geometry sampled into a grid.
+pub async fn get_tiles(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let d = data(&s, &id).await?;
+    let g = d.lock().await;
+    let revision = g.tiles.revision;
+    let (screen, follows) = match &g.tiles.value {
+        Some(t) => (t.clone(), false),
+        None => {
+            let (rig, _) = s.store.snapshot();
+            let ch = rig.channel(&id).map_err(|_| not_found(&id))?;
+            (
+                sample_geometry(&rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
+                true,
+            )
+        }
+    };
+    Ok(tagged(
+        serde_json::json!({"revision": revision, "follows_geometry": follows, "tiles": screen}),
+        revision,
+    ))
+}
+
+pub async fn put_tiles(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    let screen: TileScreen = parse_body(&body)?;
+    screen.validate()?;
+    replace_tiles(&s, &id, wanted, Some(screen)).await
+}
+
+/// Back to the geometry's exact warp.
+pub async fn delete_tiles(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    replace_tiles(&s, &id, wanted, None).await
+}
+
+async fn replace_tiles(
+    s: &Arc<AppState>,
+    id: &str,
+    wanted: u64,
+    screen: Option<TileScreen>,
+) -> Result<Response, ApiError> {
+    let d = data(s, id).await?;
+    let mut g = d.lock().await;
+    fresh(g.tiles.revision, wanted)?;
+    let revision = wanted + 1;
+    let mut next = g.clone();
+    next.tiles = Versioned {
+        revision,
+        value: screen.map(|mut t| {
+            t.revision = revision;
+            t
+        }),
+    };
+    commit(s, id, &mut g, next, "tiles", revision).await?;
+    Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Patch {
+    pub edits: Vec<Edit>,
+}
+
+/// Applies a list of edits, all or none; the first edit of a channel that follows the geometry
+/// starts from the geometry sampled into a grid.
+pub async fn patch_tiles(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    let patch: Patch = parse_body(&body)?;
+    if patch.edits.is_empty() || patch.edits.len() > 1000 {
+        return Err(ApiError::Invalid {
+            field: "/edits".into(),
+            reason: "must hold 1 to 1000 edits".into(),
+        });
+    }
+    let d = data(&s, &id).await?;
+    let mut g = d.lock().await;
+    fresh(g.tiles.revision, wanted)?;
+    let (rig, _) = s.store.snapshot();
+    let ch = rig.channel(&id).map_err(|_| not_found(&id))?;
+    let mut screen = match &g.tiles.value {
+        Some(t) => t.clone(),
+        None => sample_geometry(&rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
+    };
+    for (n, e) in patch.edits.into_iter().enumerate() {
+        let named = |err: crate::Error| match err {
+            crate::Error::Invalid { name, reason } => ApiError::Invalid {
+                field: format!("/edits/{n}/{name}"),
+                reason,
+            },
+            other => ApiError::Internal(other.to_string()),
+        };
+        // `reset` resamples the geometry: a screen sampled from it keeps no other source.
+        screen = match e {
+            Edit::Reset => {
+                let (c, r) = match &screen.layout {
+                    crate::tiles::Layout::Grid { columns, rows, .. } => (*columns, *rows),
+                    crate::tiles::Layout::Soup { .. } => (SAMPLED_COLUMNS, sampled_rows(ch)),
+                };
+                sample_geometry(&rig, ch, c, r).map_err(named)?
+            }
+            other => screen.edit(&other).map_err(named)?,
+        };
+    }
+    let revision = wanted + 1;
+    screen.revision = revision;
+    let mut next = g.clone();
+    next.tiles = Versioned {
+        revision,
+        value: Some(screen),
+    };
+    commit(&s, &id, &mut g, next, "tiles", revision).await?;
+    Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}

@@ -1,0 +1,142 @@
+//! A small blocking HTTP/1.1 client with keep-alive, enough to drive the daemon from tests,
+//! benchmarks and scripts without pulling in a client stack: requests with a body and headers,
+//! responses with `Content-Length` (all the daemon's non-streaming responses have one).
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::time::Duration;
+
+pub struct Client {
+    addr: SocketAddr,
+    token: Option<String>,
+    conn: Option<BufReader<TcpStream>>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Reply {
+    pub status: u16,
+    pub headers: Vec<(String, String)>,
+    pub body: Vec<u8>,
+}
+
+impl Reply {
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(name))
+            .map(|(_, v)| v.as_str())
+    }
+
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_slice(&self.body).unwrap_or(serde_json::Value::Null)
+    }
+
+    /// The revision in the ETag (`"7"` → 7; `"3.7"` → 7, the part after the dot).
+    pub fn revision(&self) -> Option<u64> {
+        let tag = self.header("etag")?.trim_matches('"');
+        tag.rsplit('.').next()?.parse().ok()
+    }
+}
+
+impl Client {
+    pub fn new(addr: SocketAddr, token: Option<String>) -> Self {
+        Client {
+            addr,
+            token,
+            conn: None,
+        }
+    }
+
+    /// Sends one request; reconnects once if a kept-alive connection was closed.
+    pub fn send(
+        &mut self,
+        method: &str,
+        path: &str,
+        headers: &[(&str, &str)],
+        body: &[u8],
+    ) -> std::io::Result<Reply> {
+        match self.try_send(method, path, headers, body) {
+            Ok(r) => Ok(r),
+            Err(_) if self.conn.is_some() => {
+                self.conn = None;
+                self.try_send(method, path, headers, body)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn try_send(
+        &mut self,
+        method: &str,
+        path: &str,
+        headers: &[(&str, &str)],
+        body: &[u8],
+    ) -> std::io::Result<Reply> {
+        if self.conn.is_none() {
+            let s = TcpStream::connect_timeout(&self.addr, Duration::from_secs(5))?;
+            s.set_read_timeout(Some(Duration::from_secs(120)))?;
+            s.set_nodelay(true)?;
+            self.conn = Some(BufReader::new(s));
+        }
+        let conn = self.conn.as_mut().expect("connected above");
+        let mut req = format!(
+            "{method} {path} HTTP/1.1\r\nHost: {}\r\nContent-Length: {}\r\n",
+            self.addr,
+            body.len()
+        );
+        if let Some(t) = &self.token {
+            req += &format!("Authorization: Bearer {t}\r\n");
+        }
+        for (k, v) in headers {
+            req += &format!("{k}: {v}\r\n");
+        }
+        req += "\r\n";
+        let stream = conn.get_mut();
+        stream.write_all(req.as_bytes())?;
+        stream.write_all(body)?;
+        let bad = |why: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string());
+        let mut line = String::new();
+        if conn.read_line(&mut line)? == 0 {
+            return Err(bad("connection closed"));
+        }
+        let status: u16 = line
+            .split_whitespace()
+            .nth(1)
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| bad("no status line"))?;
+        let mut headers = Vec::new();
+        loop {
+            line.clear();
+            conn.read_line(&mut line)?;
+            let l = line.trim_end();
+            if l.is_empty() {
+                break;
+            }
+            if let Some((k, v)) = l.split_once(':') {
+                headers.push((k.trim().to_string(), v.trim().to_string()));
+            }
+        }
+        let len: usize = headers
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case("content-length"))
+            .and_then(|(_, v)| v.parse().ok())
+            .ok_or_else(|| bad("no Content-Length"))?;
+        let mut body = vec![0; len];
+        conn.read_exact(&mut body)?;
+        let close = headers
+            .iter()
+            .any(|(k, v)| k.eq_ignore_ascii_case("connection") && v.eq_ignore_ascii_case("close"));
+        if close {
+            self.conn = None;
+        }
+        Ok(Reply {
+            status,
+            headers,
+            body,
+        })
+    }
+
+    pub fn get(&mut self, path: &str) -> std::io::Result<Reply> {
+        self.send("GET", path, &[], b"")
+    }
+}

@@ -1,0 +1,69 @@
+//! Helpers for the daemon's tests: a small rig, state on a data directory, oneshot calls.
+
+use axum::body::Body;
+use axum::http::{HeaderMap, Request, StatusCode, header};
+use http_body_util::BodyExt;
+use omniwarp::rig::RigDoc;
+use omniwarp::server::{AppState, Store, router};
+use std::path::Path;
+use std::sync::Arc;
+use tower::ServiceExt;
+
+/// The two-projector flat rig at a tenth of its resolution, so warps are quick.
+pub fn flat_rig() -> RigDoc {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/flat-2proj.json"),
+    )
+    .unwrap();
+    let mut doc: RigDoc = serde_json::from_str(&text).unwrap();
+    for c in &mut doc.channels {
+        c.resolution = [192, 108];
+        let i = &mut c.lens.intrinsics;
+        i[0] /= 10.0;
+        i[1] /= 10.0;
+        i[2] = (i[2] + 0.5) / 10.0 - 0.5;
+        i[3] = (i[3] + 0.5) / 10.0 - 0.5;
+    }
+    doc
+}
+
+pub fn state_with(dir: Option<&Path>, token: Option<&str>, rig: RigDoc) -> Arc<AppState> {
+    AppState::new(
+        Store::open(dir.map(Path::to_path_buf), Some(rig)).unwrap(),
+        token.map(String::from),
+    )
+}
+
+pub fn state(dir: Option<&Path>, token: Option<&str>) -> Arc<AppState> {
+    state_with(dir, token, flat_rig())
+}
+
+pub async fn call(s: &Arc<AppState>, req: Request<Body>) -> (StatusCode, HeaderMap, Vec<u8>) {
+    let resp = router(s.clone()).oneshot(req).await.unwrap();
+    let (parts, body) = resp.into_parts();
+    (
+        parts.status,
+        parts.headers,
+        body.collect().await.unwrap().to_bytes().to_vec(),
+    )
+}
+
+pub fn get(uri: &str) -> Request<Body> {
+    Request::get(uri).body(Body::empty()).unwrap()
+}
+
+/// A write with an optional `If-Match` revision and a JSON body.
+pub fn write(method: &str, uri: &str, if_match: Option<u64>, body: String) -> Request<Body> {
+    let mut b = Request::builder()
+        .method(method)
+        .uri(uri)
+        .header(header::CONTENT_TYPE, "application/json");
+    if let Some(m) = if_match {
+        b = b.header(header::IF_MATCH, format!("\"{m}\""));
+    }
+    b.body(Body::from(body)).unwrap()
+}
+
+pub fn json(bytes: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(bytes).unwrap()
+}

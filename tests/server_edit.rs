@@ -1,0 +1,692 @@
+//! The daemon's editable resources and exports through `oneshot`: content canvases, tile
+//! screens (PATCH), calibration proposals, media-server exports and the MPCDI package, the
+//! worker bound (503) and cancellation of work whose client went away.
+
+mod common;
+
+use axum::http::{StatusCode, header};
+use common::server::{call, flat_rig, get, json, state, state_with, write};
+use omniwarp::export::mpcdi;
+use omniwarp::export::{bourke, grid, parse_pfm};
+use std::time::Duration;
+
+fn edits(list: serde_json::Value) -> String {
+    serde_json::json!({ "edits": list }).to_string()
+}
+
+#[tokio::test]
+async fn content_canvas_has_its_own_revision_and_named_errors() {
+    let s = state(None, None);
+    let (st, h, body) = call(&s, get("/v1/channels/left/content")).await;
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"1\"")
+    );
+    assert_eq!(json(&body)["content"]["projection"], "equirect");
+    let canvas =
+        serde_json::json!({"projection": "flat", "params": {"hfov": 60.0}, "size": [1920, 1080]});
+    let (st, _, _) = call(
+        &s,
+        write("PUT", "/v1/channels/left/content", None, canvas.to_string()),
+    )
+    .await;
+    assert_eq!(st, StatusCode::PRECONDITION_REQUIRED);
+    let (st, h, _) = call(
+        &s,
+        write(
+            "PUT",
+            "/v1/channels/left/content",
+            Some(1),
+            canvas.to_string(),
+        ),
+    )
+    .await;
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"2\"")
+    );
+    let (st, _, body) = call(
+        &s,
+        write(
+            "PUT",
+            "/v1/channels/left/content",
+            Some(1),
+            canvas.to_string(),
+        ),
+    )
+    .await;
+    assert_eq!(
+        (st, json(&body)["current_revision"].as_u64()),
+        (StatusCode::PRECONDITION_FAILED, Some(2))
+    );
+    // The other channel is untouched.
+    let (_, h, _) = call(&s, get("/v1/channels/right/content")).await;
+    assert_eq!(h[header::ETAG], "\"1\"");
+    for (bad, field) in [
+        (
+            serde_json::json!({"projection": "flat", "params": {"hfov": 60.0}, "size": [0, 1080]}),
+            "/size",
+        ),
+        (
+            serde_json::json!({"projection": "flat", "params": {"hfov": 60.0}, "size": [64, 64], "colour": 1}),
+            "/",
+        ),
+        (
+            serde_json::json!({"projection": "flat", "params": {"hfov": "wide"}, "size": [64, 64]}),
+            "/params/hfov",
+        ),
+        (
+            serde_json::json!({"projection": "nope", "size": [64, 64]}),
+            "/projection",
+        ),
+    ] {
+        let (st, _, body) = call(
+            &s,
+            write("PUT", "/v1/channels/left/content", Some(2), bad.to_string()),
+        )
+        .await;
+        assert_eq!(st, StatusCode::BAD_REQUEST, "{bad}");
+        let got = json(&body)["field"].as_str().unwrap().to_string();
+        assert!(
+            got.starts_with(field),
+            "{bad}: field {got}, expected {field}"
+        );
+    }
+    assert_eq!(
+        call(&s, get("/v1/channels/..%2Frig/content")).await.0,
+        StatusCode::NOT_FOUND,
+        "no path traversal through ids"
+    );
+}
+
+/// Largest angle between the valid directions of two warp maps (EXR bytes), degrees.
+fn largest_angle(a: &[u8], b: &[u8]) -> f64 {
+    let dir = tempfile::tempdir().unwrap();
+    let read = |bytes: &[u8], name: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        omniwarp::normalmap::NormalMap::read(&p).unwrap()
+    };
+    let (a, b) = (read(a, "a.exr"), read(b, "b.exr"));
+    let mut worst = 0.0f64;
+    for j in 0..a.height() {
+        for i in 0..a.width() {
+            if let (Some(u), Some(v)) = (a.direction(i, j), b.direction(i, j)) {
+                worst = worst.max(u.angle_between(v).to_degrees());
+            }
+        }
+    }
+    worst
+}
+
+#[tokio::test]
+async fn tile_screens_follow_the_geometry_until_edited_and_patch_atomically() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = state(Some(dir.path()), None);
+    let (st, h, body) = call(&s, get("/v1/channels/left/tiles")).await;
+    let t = json(&body);
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"1\"")
+    );
+    assert_eq!(t["follows_geometry"], true);
+    assert_eq!(
+        (
+            t["tiles"]["layout"]["columns"].as_u64(),
+            t["tiles"]["layout"]["rows"].as_u64()
+        ),
+        (Some(33), Some(19))
+    );
+    let (_, h, exact) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert_eq!(h[header::ETAG], "\"1.1\"");
+
+    // A no-op edit turns the sampled geometry into the channel's tile screen: the warp now comes
+    // from the 33×19 tiles and stays within a small angle of the exact one.
+    let (st, h, _) = call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(1),
+            edits(serde_json::json!([{"op": "set_feature", "column": 0, "row": 0, "f": 1.0}])),
+        ),
+    )
+    .await;
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"2\"")
+    );
+    let (_, h, tiled) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert_eq!(h[header::ETAG], "\"1.2\"");
+    let err = largest_angle(&exact, &tiled);
+    assert!(err < 0.02, "33×19 tiles vs exact geometry: {err}°");
+    assert!(
+        dir.path().join("warps/left-r1-t2.exr").exists(),
+        "the warp map is kept on disk"
+    );
+    assert!(
+        !dir.path().join("warps/left-r1-t1.exr").exists(),
+        "older warp maps are removed"
+    );
+
+    // f = 0 on the whole left half greys the render there.
+    let zero: Vec<_> = (0..19)
+        .flat_map(|r| {
+            (0..17).map(
+                move |c| serde_json::json!({"op": "set_feature", "column": c, "row": r, "f": 0.0}),
+            )
+        })
+        .collect();
+    let (st, _, _) = call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(2),
+            edits(serde_json::Value::Array(zero)),
+        ),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK);
+    let (st, _, png) = call(&s, get("/v1/channels/left/render?content=checker&face=64")).await;
+    assert_eq!(st, StatusCode::OK);
+    let img = image::load_from_memory(&png).unwrap().into_rgba8();
+    let chroma = |x: u32, y: u32| {
+        let p = img.get_pixel(x, y).0;
+        p[..3].iter().max().unwrap() - p[..3].iter().min().unwrap()
+    };
+    let left: u32 = (10..40)
+        .flat_map(|x| (20..80).map(move |y| (x, y)))
+        .map(|(x, y)| u32::from(chroma(x, y)))
+        .max()
+        .unwrap();
+    let right: u32 = (150..180)
+        .flat_map(|x| (20..80).map(move |y| (x, y)))
+        .map(|(x, y)| u32::from(chroma(x, y)))
+        .max()
+        .unwrap();
+    assert!(left <= 2 && right > 20, "chroma left {left}, right {right}");
+
+    // Edits are all-or-nothing and errors name the edit and field.
+    let (st, _, body) = call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(3),
+            edits(serde_json::json!([
+                {"op": "insert_row", "at": 3},
+                {"op": "set_feature", "column": 99, "row": 0, "phi": 1.0}
+            ])),
+        ),
+    )
+    .await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/edits/1/column"))
+    );
+    let (_, h, _) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(h[header::ETAG], "\"3\"", "a refused patch changes nothing");
+    let (st, _, body) = call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(3),
+            edits(serde_json::json!([{"op": "twist"}])),
+        ),
+    )
+    .await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/edits/0/op"))
+    );
+    let (st, _, _) = call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(1),
+            edits(serde_json::json!([{"op": "smooth", "iterations": 1}])),
+        ),
+    )
+    .await;
+    assert_eq!(st, StatusCode::PRECONDITION_FAILED);
+    // A fold-over is refused.
+    let (st, _, body) = call(&s, write("PATCH", "/v1/channels/left/tiles", Some(3), edits(serde_json::json!([{"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}, {"op": "remove_row", "at": 0}])))).await;
+    assert_eq!(
+        st,
+        StatusCode::BAD_REQUEST,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+
+    // Rows, regions, smoothing and reset all apply; the state survives a restart.
+    let (st, _, body) = call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(3),
+            edits(serde_json::json!([
+                {"op": "insert_column", "at": 5},
+                {"op": "smooth", "iterations": 2},
+                {"op": "reset"}
+            ])),
+        ),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let (_, _, body) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(json(&body)["tiles"]["layout"]["columns"], 34);
+    let again = state(Some(dir.path()), None);
+    let (_, h, body) = call(&again, get("/v1/channels/left/tiles")).await;
+    assert_eq!(
+        (
+            h[header::ETAG].to_str().unwrap(),
+            json(&body)["follows_geometry"].as_bool()
+        ),
+        ("\"4\"", Some(false))
+    );
+
+    // DELETE goes back to the exact geometry.
+    let (st, _, _) = call(
+        &again,
+        write("DELETE", "/v1/channels/left/tiles", Some(4), String::new()),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK);
+    let (_, _, back) = call(&again, get("/v1/channels/left/warp.exr")).await;
+    assert_eq!(largest_angle(&exact, &back), 0.0);
+}
+
+#[tokio::test]
+async fn calibration_proposals_are_solved_kept_and_applied() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = state(Some(dir.path()), None);
+    let rig = s.store.snapshot().0;
+    let ch = rig.channel("right").unwrap();
+    // Points on the wall the projector lights, with their exact pixels.
+    let mut points = Vec::new();
+    for j in 0..6 {
+        for i in 0..8 {
+            let q = [10.0 + 24.0 * f64::from(i), 8.0 + 18.0 * f64::from(j)];
+            if let Some(p) = rig.wall_point(ch, q) {
+                points.push(serde_json::json!({"pixel": q, "world": p.to_array()}));
+            }
+        }
+    }
+    assert!(points.len() > 30);
+    // The wall is flat, so the lens must be known: the pose is solved (homography, then LM).
+    let lens = &rig.doc.channels[1].lens;
+    let body =
+        serde_json::json!({"points": points, "lens": lens, "intrinsics_fixed": true}).to_string();
+    let (st, _, resp) = call(
+        &s,
+        write("POST", "/v1/channels/right/calibration", None, body),
+    )
+    .await;
+    assert_eq!(
+        st,
+        StatusCode::CREATED,
+        "{}",
+        String::from_utf8_lossy(&resp)
+    );
+    let p = json(&resp);
+    assert!(p["rms"].as_f64().unwrap() < 0.05, "{p}");
+    let pos = p["proposed"]["pose"]["position"].as_array().unwrap();
+    for (k, got) in pos.iter().enumerate() {
+        assert!((got.as_f64().unwrap() - ch.position[k]).abs() < 1e-3, "{p}");
+    }
+    let pid = p["id"].as_u64().unwrap();
+    assert!(dir.path().join(format!("proposals/{pid}.json")).exists());
+    let (st, _, _) = call(&s, get(&format!("/v1/proposals/{pid}"))).await;
+    assert_eq!(st, StatusCode::OK);
+    assert_eq!(
+        call(&s, get("/v1/proposals/999")).await.0,
+        StatusCode::NOT_FOUND
+    );
+
+    // Too few points: 400 naming the field; bad model: 400 naming /model.
+    let few = serde_json::json!({"points": points[..3]}).to_string();
+    let (st, _, body) = call(
+        &s,
+        write("POST", "/v1/channels/right/calibration", None, few),
+    )
+    .await;
+    assert_eq!(
+        st,
+        StatusCode::BAD_REQUEST,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    assert!(
+        json(&body)["field"]
+            .as_str()
+            .unwrap()
+            .starts_with("/points")
+    );
+    let bad = serde_json::json!({"points": points, "model": "FISHEYE9"}).to_string();
+    let (st, _, body) = call(
+        &s,
+        write("POST", "/v1/channels/right/calibration", None, bad),
+    )
+    .await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/model"))
+    );
+
+    // Applying needs the rig revision.
+    let apply = format!("/v1/proposals/{pid}/apply");
+    assert_eq!(
+        call(&s, write("POST", &apply, None, String::new())).await.0,
+        StatusCode::PRECONDITION_REQUIRED
+    );
+    let (st, h, _) = call(&s, write("POST", &apply, Some(1), String::new())).await;
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"2\"")
+    );
+    let (_, _, body) = call(&s, get("/v1/rig")).await;
+    assert_eq!(
+        json(&body)["rig"]["channels"][1]["lens"],
+        serde_json::to_value(lens).unwrap()
+    );
+    assert!(json(&body)["rig"]["channels"][1]["pose"]["rvec"].is_array());
+    assert_eq!(
+        call(&s, write("POST", &apply, Some(1), String::new()))
+            .await
+            .0,
+        StatusCode::PRECONDITION_FAILED
+    );
+}
+
+#[tokio::test]
+async fn channel_exports_parse_back_and_report_their_grid() {
+    let s = state(None, None);
+    // A narrow flat canvas: most of the projector lies outside it.
+    let canvas =
+        serde_json::json!({"projection": "flat", "params": {"hfov": 20.0}, "size": [100, 50]});
+    let (st, _, body) = call(
+        &s,
+        write(
+            "PUT",
+            "/v1/channels/left/content",
+            Some(1),
+            canvas.to_string(),
+        ),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let (st, h, body) = call(&s, get("/v1/channels/left/exports/warp-2d.pfm?tolerance=2")).await;
+    assert_eq!(st, StatusCode::OK);
+    let (gw, gh, rows) = parse_pfm(&body, "2d").unwrap();
+    assert_eq!(h["x-omniwarp-grid"].to_str().unwrap(), format!("{gw}x{gh}"));
+    let err: f64 = h["x-omniwarp-max-error"].to_str().unwrap().parse().unwrap();
+    assert!(err <= 2.0, "{err}");
+    assert!(
+        gw < 192,
+        "a smooth warp needs fewer samples than pixels: {gw}"
+    );
+    // Samples past the canvas keep their coordinates (outside [0, 1]); alpha hides them.
+    assert!(rows.iter().any(|r| r[0] < 0.0) && rows.iter().any(|r| (0.2..0.8).contains(&r[0])));
+    // Rows top to bottom after reading: v grows downwards on a valid column.
+    let col: Vec<f32> = (0..gh)
+        .map(|j| rows[j * gw + gw / 2][1])
+        .filter(|v| v.is_finite())
+        .collect();
+    assert!(
+        col.len() > 2 && col.windows(2).all(|w| w[1] > w[0]),
+        "{gw}×{gh}: {col:?} {rows:?}"
+    );
+    // On disk the first row is the bottom one.
+    let header_len = format!("PF\n{gw} {gh}\n-1.0\n").len();
+    let first = f32::from_le_bytes(body[header_len + 4..header_len + 8].try_into().unwrap());
+    let bottom_left = rows[(gh - 1) * gw][1];
+    assert!(
+        first.to_bits() == bottom_left.to_bits(),
+        "{first} vs {bottom_left}"
+    );
+
+    let (_, h, body) = call(&s, get("/v1/channels/left/exports/warp-a3.pfm")).await;
+    let (w3, h3, a3) = parse_pfm(&body, "a3").unwrap();
+    assert_eq!(h["x-omniwarp-grid"].to_str().unwrap(), format!("{w3}x{h3}"));
+    assert!(
+        a3.iter()
+            .all(|p| p.iter().all(|v| v.is_nan())
+                || p.iter().all(|v| v.is_finite()) && p != &[0.0; 3])
+    );
+
+    let (_, h, body) = call(&s, get("/v1/channels/left/exports/mesh.data")).await;
+    let mesh = bourke::read_mesh(std::str::from_utf8(&body).unwrap()).unwrap();
+    assert_eq!(
+        (mesh.kind, h["x-omniwarp-grid"].to_str().unwrap()),
+        (2, format!("{}x{}", mesh.nx, mesh.ny).as_str())
+    );
+    let first = mesh.nodes[0];
+    let last = mesh.nodes[mesh.nodes.len() - 1];
+    let aspect = 192.0 / 108.0;
+    assert!(
+        (first[0] + aspect).abs() < 1e-5 && (first[1] + 1.0).abs() < 1e-6,
+        "bottom-left first: {first:?}"
+    );
+    assert!(
+        (last[0] - aspect).abs() < 1e-5 && (last[1] - 1.0).abs() < 1e-6,
+        "top-right last: {last:?}"
+    );
+    assert!(
+        mesh.nodes.iter().any(|n| n[4] < 0.0),
+        "nodes off the canvas are not drawn"
+    );
+
+    let (_, _, body) = call(&s, get("/v1/channels/left/exports/stmap.exr")).await;
+    assert_eq!(&body[..4], &[0x76, 0x2f, 0x31, 0x01]);
+    let (_, _, body) = call(&s, get("/v1/channels/left/exports/xmap.pgm")).await;
+    assert!(body.starts_with(b"P5\n192 108\n65535\n") && body.len() == 17 + 192 * 108 * 2);
+    assert_eq!(
+        call(&s, get("/v1/channels/left/exports/warp.txt")).await.0,
+        StatusCode::NOT_FOUND
+    );
+    let (st, _, body) = call(&s, get("/v1/channels/left/exports/mesh.data?tolerance=-1")).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("tolerance"))
+    );
+}
+
+#[tokio::test]
+async fn mpcdi_packages_use_the_reference_spellings_and_blank_unknown_samples() {
+    let s = state(None, None);
+    let canvas =
+        serde_json::json!({"projection": "flat", "params": {"hfov": 20.0}, "size": [100, 50]});
+    let (st, _, body) = call(
+        &s,
+        write(
+            "PUT",
+            "/v1/channels/right/content",
+            Some(1),
+            canvas.to_string(),
+        ),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let mut unknown = std::collections::HashMap::new();
+    for (version, profile) in [("1.0", "2d"), ("2.0", "2d"), ("1.0", "a3"), ("2.0", "a3")] {
+        let (st, _, body) = call(
+            &s,
+            get(&format!(
+                "/v1/export.mpcdi?version={version}&profile={profile}"
+            )),
+        )
+        .await;
+        assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+        let pkg = mpcdi::read(&body).unwrap();
+        for spelling in [
+            "Xresolution=",
+            "Yresolution=",
+            "xsize=",
+            "ysize=",
+            "<originof3DData>",
+            "<geometricUnit>",
+            "<interpolation>",
+            " level=\"1\"",
+        ] {
+            assert!(
+                pkg.xml.contains(spelling),
+                "{version} {profile}: {spelling} missing"
+            );
+        }
+        assert_eq!(
+            (pkg.attr("version"), pkg.attr("profile")),
+            (Some(version), Some(profile))
+        );
+        if version == "2.0" {
+            assert_eq!(
+                (pkg.attr("geometry"), pkg.attr("color")),
+                (Some("1"), Some("1"))
+            );
+        }
+        let b = &pkg.buffers[0];
+        assert_eq!((b.resolution, b.regions.len()), ([384, 108], 2));
+        assert_eq!(b.regions[1].rect, [0.5, 0.0, 0.5, 1.0]);
+        for r in &b.regions {
+            let (gw, gh, samples) = &r.warp;
+            let (aw, ah, alpha) = &r.alpha;
+            assert_eq!(([*aw, *ah], r.gamma_embedded), (r.resolution, 2.2));
+            // Every NaN sample has alpha 0 at its pixel.
+            for (n, p) in samples.iter().enumerate() {
+                let (i, j) = (n % gw, n / gw);
+                let x = grid::position(i, *gw, *aw as usize)
+                    .round()
+                    .clamp(0.0, f64::from(*aw - 1)) as usize;
+                let y = grid::position(j, *gh, *ah as usize)
+                    .round()
+                    .clamp(0.0, f64::from(*ah - 1)) as usize;
+                if p[0].is_nan() {
+                    assert_eq!(
+                        alpha[y * *aw as usize + x],
+                        0.0,
+                        "{} sample ({i}, {j})",
+                        r.id
+                    );
+                } else if profile == "a3" {
+                    assert_ne!(p, &[0.0; 3]);
+                }
+            }
+            let dark = alpha.iter().filter(|a| **a == 0.0).count();
+            unknown.insert((profile, r.id.clone()), dark as f64 / alpha.len() as f64);
+        }
+    }
+    // The narrow canvas leaves much of the right projector without content: dark in 2d.
+    let f = |p: &'static str, id: &str| unknown[&(p, id.to_string())];
+    assert!(f("2d", "right") > f("a3", "right") + 0.2, "{unknown:?}");
+    assert!(
+        (f("2d", "left") - f("a3", "left")).abs() < 0.05,
+        "{unknown:?}"
+    );
+    let (st, _, body) = call(&s, get("/v1/export.mpcdi?profile=3d")).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("profile"))
+    );
+}
+
+#[tokio::test]
+async fn expensive_work_is_bounded_and_cancelled_when_the_client_goes_away() {
+    let s = state(None, None);
+    // With every worker taken, renders are refused at once with a hint to retry.
+    let permits = s.workers.try_acquire_many(2).unwrap();
+    let (st, h, _) = call(&s, get("/v1/channels/left/render")).await;
+    assert_eq!(
+        (st, h[header::RETRY_AFTER].to_str().unwrap()),
+        (StatusCode::SERVICE_UNAVAILABLE, "1")
+    );
+    drop(permits);
+
+    // A full-size warp (about a second here) given up 50 ms in.
+    let mut big = flat_rig();
+    big.channels[0].resolution = [1920, 1080];
+    for (k, v) in big.channels[0]
+        .lens
+        .intrinsics
+        .iter_mut()
+        .take(4)
+        .enumerate()
+    {
+        *v = if k < 2 {
+            *v * 10.0
+        } else {
+            (*v + 0.5) * 10.0 - 0.5
+        };
+    }
+    let s = state_with(None, None, big);
+    let req = call(&s, get("/v1/channels/left/warp.exr"));
+    assert!(
+        tokio::time::timeout(Duration::from_millis(50), req)
+            .await
+            .is_err()
+    );
+    let mut cancelled = 0;
+    for _ in 0..200 {
+        let (_, _, body) = call(&s, get("/v1/health")).await;
+        let w = &json(&body)["workers"];
+        cancelled = w["cancelled"].as_u64().unwrap();
+        if cancelled > 0 && w["free"] == 2 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(cancelled, 1, "the abandoned warp stopped");
+    assert!(s.computed.lock().unwrap().is_empty());
+}
+
+#[tokio::test]
+async fn the_change_feed_reports_edits_of_every_kind() {
+    use http_body_util::BodyExt;
+    let s = state(None, None);
+    let resp = tower::ServiceExt::oneshot(omniwarp::server::router(s.clone()), get("/v1/events"))
+        .await
+        .unwrap();
+    let mut body = resp.into_body();
+    call(
+        &s,
+        write(
+            "PATCH",
+            "/v1/channels/right/tiles",
+            Some(1),
+            edits(serde_json::json!([{"op": "smooth", "iterations": 1}])),
+        ),
+    )
+    .await;
+    let canvas = serde_json::json!({"projection": "equirect", "params": {"hfov": 360.0, "vfov": 180.0}, "size": [2048, 1024]});
+    call(
+        &s,
+        write(
+            "PUT",
+            "/v1/channels/left/content",
+            Some(1),
+            canvas.to_string(),
+        ),
+    )
+    .await;
+    let mut text = String::new();
+    while !(text.contains("\"tiles\"") && text.contains("\"content\"")) {
+        let frame = tokio::time::timeout(Duration::from_secs(5), body.frame())
+            .await
+            .unwrap()
+            .unwrap()
+            .unwrap();
+        if let Ok(d) = frame.into_data() {
+            text += &String::from_utf8_lossy(&d);
+        }
+    }
+    assert!(
+        text.starts_with("event: change\ndata: {\"kind\":\"rig\",\"revision\":1}"),
+        "{text}"
+    );
+    assert!(
+        text.contains("\"channel\":\"right\"") && text.contains("\"channel\":\"left\""),
+        "{text}"
+    );
+}
