@@ -33,11 +33,14 @@ pub struct Cli {
 enum Command {
     /// Run the daemon: the rig over HTTP/JSON on 127.0.0.1:7878 (see api/openapi.yaml).
     Serve(crate::serve_cmd::ServeArgs),
+    /// Time 3D scenes through the GPU renderer against cube-face size, with and without CMF,
+    /// beside the CPU reference (seed 000, Figure 8).
+    GpuBench(crate::scene_cmd::GpuBenchArgs),
     /// Load the daemon over loopback: tile edits per second and latency with many clients, and
     /// 1080p preview latency while they edit.
     ServeBench(crate::serve_bench::ServeBenchArgs),
     /// Render content through a projection (or a normal map) into an image.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Compute a projection's normal map (per pixel the unit sampling vector V) as float EXR.
     NormalMap(NormalMapArgs),
     /// Resample content into a cube map in any layout (six files, strip, ffmpeg c3x2/c6x1).
@@ -167,10 +170,10 @@ pub fn flag_error(e: omniwarp::Error) -> anyhow::Error {
 struct ContentArgs {
     /// Content image: PNG or JPEG (8-bit) or OpenEXR (float).
     #[arg(long)]
-    content: PathBuf,
+    content: Option<PathBuf>,
     /// How the content image is laid out.
     #[arg(long, value_enum)]
-    content_format: ContentFormat,
+    content_format: Option<ContentFormat>,
     /// Horizontal field of view of a panorama, degrees (default 360).
     #[arg(long)]
     content_hfov: Option<f64>,
@@ -255,6 +258,8 @@ struct RenderArgs {
     /// is shown.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    scene: crate::scene_cmd::SceneArgs,
 }
 
 #[derive(Args)]
@@ -335,7 +340,7 @@ struct PatternArgs {
     out: PathBuf,
 }
 
-fn parse_vec3(s: &str) -> Result<DVec3, String> {
+pub fn parse_vec3(s: &str) -> Result<DVec3, String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|c| c.trim().parse::<f64>())
@@ -374,7 +379,8 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Serve(a) => crate::serve_cmd::run(a),
         Command::ServeBench(a) => crate::serve_bench::run(a),
-        Command::Render(a) => render_cmd(a),
+        Command::GpuBench(a) => crate::scene_cmd::bench(a),
+        Command::Render(a) => render_cmd(*a),
         Command::NormalMap(a) => {
             let (w, h) = a.size;
             let view = a.projection.view(w, h)?;
@@ -439,15 +445,22 @@ enum AnyContent {
 }
 
 fn load_content(a: &ContentArgs, want_float: bool) -> Result<AnyContent> {
-    let loaded = match a.content_format {
-        ContentFormat::CubemapFaces => image_io::read_cube_faces(&a.content.to_string_lossy()),
-        _ => image_io::read_image(&a.content),
+    let path = a
+        .content
+        .as_ref()
+        .context("--content: needed (render can take --scene instead)")?;
+    let format = a
+        .content_format
+        .context("--content-format: needed with --content")?;
+    let loaded = match format {
+        ContentFormat::CubemapFaces => image_io::read_cube_faces(&path.to_string_lossy()),
+        _ => image_io::read_image(path),
     }
     .context("--content")?;
     let orient =
         Orientation::yaw_pitch_roll(a.content_rotate.x, a.content_rotate.y, a.content_rotate.z)
             .map_err(flag_error)?;
-    let fmt = a.content_format.format();
+    let fmt = format.format();
     let (hfov, vfov) = (a.content_hfov, a.content_vfov);
     let content = match loaded {
         Loaded::U8(r) if !want_float => AnyContent::U8(
@@ -506,6 +519,11 @@ enum AnyRaster {
 
 fn render_cmd(a: RenderArgs) -> Result<()> {
     check_ext(&a.out, &["png", "exr"])?;
+    if let Some(spec) = &a.scene.scene {
+        let (w, h) = a.size.context("--size: needed with --scene")?;
+        let view = a.projection.view(w, h)?;
+        return crate::scene_cmd::render(spec, &a.scene, &view, (w, h), &a.out);
+    }
     let mut mask = None;
     let map = match (&a.rig, &a.channel) {
         (Some(rig), Some(id)) => {

@@ -9,6 +9,7 @@ pub mod content;
 pub mod cubemap;
 pub mod error;
 pub mod export;
+pub mod gpu;
 pub mod image_io;
 pub mod lens;
 pub mod normalmap;

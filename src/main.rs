@@ -5,6 +5,7 @@ mod calibrate_cmd;
 mod cli;
 mod lens_cmd;
 mod rig_cmd;
+mod scene_cmd;
 mod serve_bench;
 mod serve_cmd;
 mod tiles_cmd;

@@ -1043,3 +1043,76 @@ fn export_writes_meshes_2d_grids_and_mpcdi_packages() {
         "{err}"
     );
 }
+
+#[test]
+fn render_draws_a_scene_on_the_gpu_and_the_cpu() {
+    let s = Scene::new();
+    let base = [
+        "render",
+        "--scene",
+        "city:small",
+        "--projection",
+        "cylindrical",
+        "--hfov",
+        "360",
+        "--vfov",
+        "100",
+        "--size",
+        "256x80",
+        "--face",
+        "128",
+    ];
+    for renderer in ["gpu", "cpu"] {
+        let out = format!("city-{renderer}.png");
+        let mut args = base.to_vec();
+        args.extend(["--renderer", renderer, "--out", &out]);
+        let (ok, err) = s.run(&args);
+        assert!(ok, "{renderer}: {err}");
+        assert!(err.contains("faces"), "{err}");
+        let img = image::open(s.path(&out)).unwrap();
+        assert_eq!((img.width(), img.height()), (256, 80));
+    }
+    let mut args = base.to_vec();
+    args.extend([
+        "--renderer",
+        "gpu",
+        "--adapter",
+        "no-such-adapter",
+        "--out",
+        "x.png",
+    ]);
+    let (ok, err) = s.run(&args);
+    assert!(
+        !ok && err.contains("--adapter") && err.contains("no-such-adapter"),
+        "{err}"
+    );
+    let (ok, err) = s.run(&[
+        "render",
+        "--scene",
+        "nope.fbx",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "8x8",
+        "--out",
+        "y.png",
+    ]);
+    assert!(
+        !ok && err.contains("--scene") && !s.path("y.png").exists(),
+        "{err}"
+    );
+    let (ok, err) = s.run(&[
+        "render",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "8x8",
+        "--out",
+        "z.png",
+    ]);
+    assert!(!ok && err.contains("--content"), "{err}");
+}

@@ -690,3 +690,35 @@ async fn the_change_feed_reports_edits_of_every_kind() {
         "{text}"
     );
 }
+
+#[tokio::test]
+async fn previews_render_on_the_gpu_like_on_the_cpu() {
+    let s = state(None, None);
+    let (st, _, cpu) = call(&s, get("/v1/channels/left/render?face=128")).await;
+    assert_eq!(st, StatusCode::OK);
+    let (st, _, gpu) = call(&s, get("/v1/channels/left/render?face=128&renderer=gpu")).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&gpu));
+    let (a, b) = (
+        image::load_from_memory(&cpu).unwrap().into_rgba8(),
+        image::load_from_memory(&gpu).unwrap().into_rgba8(),
+    );
+    let mse: f64 = a
+        .pixels()
+        .zip(b.pixels())
+        .flat_map(|(p, q)| (0..3).map(move |k| (f64::from(p.0[k]) - f64::from(q.0[k])).powi(2)))
+        .sum::<f64>()
+        / (3.0 * f64::from(a.width() * a.height()));
+    let db = 10.0 * (255.0f64.powi(2) / mse.max(1e-12)).log10();
+    assert!(db > 45.0, "GPU preview vs CPU: {db:.1} dB");
+    for (q, field) in [
+        ("renderer=quantum", "renderer"),
+        ("renderer=gpu&format=exr", "renderer"),
+    ] {
+        let (st, _, body) = call(&s, get(&format!("/v1/channels/left/render?{q}"))).await;
+        assert_eq!(
+            (st, json(&body)["field"].as_str()),
+            (StatusCode::BAD_REQUEST, Some(field)),
+            "{q}"
+        );
+    }
+}

@@ -3,7 +3,7 @@
 //! and vertical 2β (below 180°). Inverse: s = atan2(x, −z)/α, t = y/(√(x²+z²)·tan β); the two
 //! poles, where √(x²+z²) = 0, have no image.
 
-use super::{Entry, Params, Projection, fov, missing};
+use super::{Entry, Params, Projection, ShaderForm, fov, missing};
 use crate::error::{Outside, Result};
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -47,6 +47,10 @@ fn build(p: &Params, aspect: f64) -> Result<Box<dyn Projection>> {
 }
 
 impl Projection for Cylindrical {
+    fn shader_form(&self) -> ShaderForm {
+        ShaderForm::new(1, [self.alpha, self.tan_beta, 0.0, 0.0])
+    }
+
     fn name(&self) -> &'static str {
         NAME
     }

@@ -2,7 +2,7 @@
 //! screens. d = normalise(s·tan α, sin(tβ), −cos(tβ)) for a horizontal field of view 2α (below
 //! 180°) and vertical 2β (up to 360°). Inverse: t = atan2(y, −z)/β, s = x/(√(y²+z²)·tan α).
 
-use super::{Entry, Params, Projection, fov, missing};
+use super::{Entry, Params, Projection, ShaderForm, fov, missing};
 use crate::error::{Outside, Result};
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -45,6 +45,10 @@ fn build(p: &Params, aspect: f64) -> Result<Box<dyn Projection>> {
 }
 
 impl Projection for CylindricalVertical {
+    fn shader_form(&self) -> ShaderForm {
+        ShaderForm::new(2, [self.tan_alpha, self.beta, 0.0, 0.0])
+    }
+
     fn name(&self) -> &'static str {
         NAME
     }

@@ -2,7 +2,7 @@
 //! lon = s·h/2, lat = t·v/2, d = (cos lat·sin lon, sin lat, −cos lat·cos lon).
 //! Inverse: lon = atan2(x, −z) (0 at the poles), lat = atan2(y, √(x²+z²)).
 
-use super::{Entry, Params, Projection, fov, missing};
+use super::{Entry, Params, Projection, ShaderForm, fov, missing};
 use crate::error::{Outside, Result};
 use glam::DVec3;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -48,6 +48,10 @@ fn build(p: &Params, aspect: f64) -> Result<Box<dyn Projection>> {
 }
 
 impl Projection for Equirect {
+    fn shader_form(&self) -> ShaderForm {
+        ShaderForm::new(3, [self.half_h, self.half_v, 0.0, 0.0])
+    }
+
     fn name(&self) -> &'static str {
         NAME
     }

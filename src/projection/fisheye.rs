@@ -17,7 +17,7 @@
 //! tilted forward by `tilt` degrees, the front of the dome at the bottom of the image (the view
 //! from inside the dome with +x to the right); it is the one projection whose centre is not −z.
 
-use super::{Entry, Params, Projection, fov, missing};
+use super::{Entry, Params, Projection, ShaderForm, fov, missing};
 use crate::error::{Error, Outside, Result, finite};
 use glam::{DMat3, DVec3};
 use std::f64::consts::PI;
@@ -219,6 +219,21 @@ impl Fisheye {
 }
 
 impl Projection for Fisheye {
+    fn shader_form(&self) -> ShaderForm {
+        let radial = match self.radial {
+            Radial::Equidistant => 0,
+            Radial::Equisolid => 1,
+            Radial::Stereographic => 2,
+            Radial::Orthographic => 3,
+        };
+        ShaderForm {
+            kind: 4,
+            radial,
+            p: [self.sx, self.sy, self.theta_max * (1.0 + EDGE_EPS), 0.0],
+            turn: self.turn.unwrap_or(DMat3::IDENTITY),
+        }
+    }
+
     fn name(&self) -> &'static str {
         self.name
     }

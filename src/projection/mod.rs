@@ -32,6 +32,32 @@ pub trait Projection: Debug + Send + Sync {
     fn forward_unbounded(&self, s: f64, t: f64) -> Result<DVec3, Outside> {
         self.forward(s, t)
     }
+    /// Which formula of `shaders/projections.wgsl` (the GPU twin of `forward`) and its
+    /// constants.
+    fn shader_form(&self) -> ShaderForm;
+}
+
+/// What the WGSL twin of δP needs: the formula (`kind`: 0 flat, 1 cylindrical,
+/// 2 cylindrical-vertical, 3 equirect, 4 the fisheye family with `radial` 0 equidistant,
+/// 1 equisolid, 2 stereographic, 3 orthographic), its constants (the same fields, in the same
+/// order, as the Rust struct) and a rotation applied after it (the domemaster's turn).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShaderForm {
+    pub kind: u32,
+    pub radial: u32,
+    pub p: [f64; 4],
+    pub turn: glam::DMat3,
+}
+
+impl ShaderForm {
+    fn new(kind: u32, p: [f64; 4]) -> Self {
+        ShaderForm {
+            kind,
+            radial: 0,
+            p,
+            turn: glam::DMat3::IDENTITY,
+        }
+    }
 }
 
 /// Projection parameters as the user gives them: angles in degrees, `None` when not given.

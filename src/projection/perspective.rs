@@ -5,7 +5,7 @@
 //! frustum of fields of view h, v is l = −h/2, r = h/2. Inverse: x = −d_x/d_z, s = (x − a_x)/b_x;
 //! directions with d_z ≥ 0 are behind the image plane.
 
-use super::{Entry, Params, Projection, fov, missing};
+use super::{Entry, Params, Projection, ShaderForm, fov, missing};
 use crate::error::{Error, Outside, Result, finite};
 use glam::DVec3;
 
@@ -98,6 +98,10 @@ fn build(p: &Params, aspect: f64) -> Result<Box<dyn super::Projection>> {
 }
 
 impl Projection for Perspective {
+    fn shader_form(&self) -> ShaderForm {
+        ShaderForm::new(0, [self.ax, self.bx, self.ay, self.by])
+    }
+
     fn name(&self) -> &'static str {
         NAME
     }

@@ -140,6 +140,11 @@ impl View {
         self.projection.as_ref()
     }
 
+    /// Orientation C, off-axis vector O and zoom, for the GPU's twin of [`View::direction`].
+    pub fn parts(&self) -> (glam::DMat3, DVec3, f64) {
+        (self.orientation.matrix(), self.offaxis, self.zoom)
+    }
+
     /// The unit sampling vector V at screen position (s, t).
     pub fn direction(&self, s: f64, t: f64) -> Result<DVec3, Outside> {
         let d = self.projection.forward(s * self.zoom, t * self.zoom)?;

@@ -288,6 +288,9 @@ pub struct RenderQuery {
     /// Face size of the content cube map, 8–2048.
     #[serde(default)]
     face: Option<usize>,
+    /// `cpu` (the reference), `gpu` (wgpu; 8-bit, bilinear) or `auto`.
+    #[serde(default)]
+    renderer: Option<String>,
 }
 
 fn invalid(field: &str, reason: impl Into<String>) -> ApiError {
@@ -347,6 +350,28 @@ pub async fn render(
             format!("must be between 8 and 2048, got {face}"),
         ));
     }
+    let gpu = match q.renderer.as_deref().unwrap_or("cpu") {
+        "cpu" => None,
+        r @ ("gpu" | "auto") => {
+            let g = s.gpu();
+            if g.is_none() && r == "gpu" {
+                return Err(invalid("renderer", "this machine has no GPU adapter"));
+            }
+            if g.is_some() && (exr || !matches!(filter, Filter::Bilinear)) {
+                return Err(invalid(
+                    "renderer",
+                    "the GPU renders 8-bit PNG with the bilinear filter",
+                ));
+            }
+            g
+        }
+        other => {
+            return Err(invalid(
+                "renderer",
+                format!("must be cpu, gpu or auto, got `{other}`"),
+            ));
+        }
+    };
     let j = job(&s, &id).await?;
     let (w, h) = (j.computed.map.width(), j.computed.map.height());
     let k = scale as usize;
@@ -389,6 +414,12 @@ pub async fn render(
             face,
             filter,
         };
+        if let Some(g) = &gpu {
+            return Some(
+                look.render_gpu(g, &map, &weights, f.as_deref())
+                    .and_then(|img| png_bytes(&img)),
+            );
+        }
         let encoded = if exr {
             let img = look.render::<[f32; 4]>(&map, &weights, f.as_deref(), 1.0, 1.0)?;
             exr_bytes(&img, &[], Precision::Float)
@@ -405,6 +436,43 @@ pub async fn render(
         if exr { "image/x-exr" } else { "image/png" },
         &etag,
     ))
+}
+
+/// Multiplies colour by the blend weight raised to 1/γ (γ = 1: linear output).
+fn attenuate<T: Pixel>(img: &mut Raster<T>, weights: &[f32], gamma: f64) {
+    for (p, &k) in img.data.iter_mut().zip(weights) {
+        let m = f64::from(k).powf(1.0 / gamma) as f32;
+        let v = p.to_f32();
+        *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
+    }
+}
+
+/// The daemon's GPU, if the machine has an adapter: created on first use.
+pub struct GpuWarp {
+    pub gpu: crate::gpu::Gpu,
+    pub pass: crate::gpu::warp::WarpPass,
+}
+
+impl AppState {
+    pub fn gpu(&self) -> Option<Arc<GpuWarp>> {
+        self.gpu
+            .get_or_init(|| match crate::gpu::Gpu::new(None) {
+                Ok(Some(gpu)) => {
+                    tracing::info!(adapter = %gpu.describe(), "GPU renderer ready");
+                    let pass = crate::gpu::warp::WarpPass::new(&gpu);
+                    Some(Arc::new(GpuWarp { gpu, pass }))
+                }
+                Ok(None) => {
+                    tracing::warn!("no GPU adapter: previews render on the CPU");
+                    None
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "GPU unusable: previews render on the CPU");
+                    None
+                }
+            })
+            .clone()
+    }
 }
 
 /// What a preview shows and how it samples it.
@@ -435,11 +503,26 @@ impl Look {
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        for (p, &k) in img.data.iter_mut().zip(weights) {
-            let m = f64::from(k).powf(1.0 / gamma) as f32;
-            let v = p.to_f32();
-            *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
-        }
+        attenuate(&mut img, weights, gamma);
         Some(img)
+    }
+
+    /// [`Look::render`] of 8-bit PNG previews with the warp on the GPU.
+    fn render_gpu(
+        &self,
+        g: &GpuWarp,
+        map: &NormalMap,
+        weights: &[f32],
+        f: Option<&[f32]>,
+    ) -> crate::Result<Raster<[u8; 4]>> {
+        let cube = CubeMap::<[u8; 4]>::from_fn(self.face, 1, |d| {
+            <[u8; 4]>::from_f32(self.pattern.eval(d).map(|c| c * 255.0))
+        });
+        let tex = crate::gpu::warp::CubeTexture::upload(&g.gpu, &cube);
+        let size = (map.width() as u32, map.height() as u32);
+        let source = crate::gpu::warp::Source::Map(map);
+        let mut img = g.pass.render(&g.gpu, &tex, source, size, f, None)?;
+        attenuate(&mut img, weights, 2.2);
+        Ok(img)
     }
 }

@@ -43,6 +43,8 @@ pub struct AppState {
     pub computed: Mutex<HashMap<(String, u64, u64), Arc<Computed>>>,
     pub jobs_done: AtomicU64,
     pub jobs_cancelled: AtomicU64,
+    /// The GPU for previews (`?renderer=gpu`), opened on first use.
+    pub gpu: std::sync::OnceLock<Option<Arc<super::outputs::GpuWarp>>>,
 }
 
 impl AppState {
@@ -56,6 +58,7 @@ impl AppState {
             computed: Mutex::new(HashMap::new()),
             jobs_done: AtomicU64::new(0),
             jobs_cancelled: AtomicU64::new(0),
+            gpu: std::sync::OnceLock::new(),
         })
     }
 

@@ -9,6 +9,8 @@ use std::path::Path;
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mesh {
     tris: Vec<[DVec3; 3]>,
+    /// Each triangle's index in the order it was given (the tree reorders them).
+    ids: Vec<u32>,
     nodes: Vec<Node>,
 }
 
@@ -34,6 +36,7 @@ impl Mesh {
             return Err(Error::invalid("mesh", "has a non-finite vertex"));
         }
         let mut m = Mesh {
+            ids: (0..tris.len() as u32).collect(),
             tris,
             nodes: Vec::new(),
         };
@@ -91,8 +94,14 @@ impl Mesh {
         Mesh::new(tris).map_err(|e| Error::file(path, e))
     }
 
+    /// The triangles in the tree's order.
     pub fn triangles(&self) -> &[[DVec3; 3]] {
         &self.tris
+    }
+
+    /// The index, as given to [`Mesh::new`], of the `k`-th triangle of [`Mesh::triangles`].
+    pub fn original_index(&self, k: usize) -> u32 {
+        self.ids[k]
     }
 
     fn bounds(tris: &[[DVec3; 3]]) -> (DVec3, DVec3) {
@@ -118,7 +127,12 @@ impl Mesh {
         if count > LEAF {
             let axis = (hi - lo).max_position();
             let centroid = |t: &[DVec3; 3]| (t[0][axis] + t[1][axis] + t[2][axis]) / 3.0;
-            self.tris[first..first + count].sort_by(|a, b| centroid(a).total_cmp(&centroid(b)));
+            let mut order: Vec<usize> = (first..first + count).collect();
+            order.sort_by(|&a, &b| centroid(&self.tris[a]).total_cmp(&centroid(&self.tris[b])));
+            let tris: Vec<_> = order.iter().map(|&k| self.tris[k]).collect();
+            let ids: Vec<_> = order.iter().map(|&k| self.ids[k]).collect();
+            self.tris[first..first + count].copy_from_slice(&tris);
+            self.ids[first..first + count].copy_from_slice(&ids);
             let half = count / 2;
             self.build(first, half);
             let right = self.build(first + half, count - half);
@@ -139,8 +153,17 @@ impl Mesh {
     }
 
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
+        match self.first_hit(origin, dir) {
+            Some((t, _, n)) => classify(origin, dir, t, n),
+            None => Hit::Miss,
+        }
+    }
+
+    /// The nearest triangle the ray meets: distance, the triangle's index as given to
+    /// [`Mesh::new`], and its unit normal (either side).
+    pub fn first_hit(&self, origin: DVec3, dir: DVec3) -> Option<(f64, u32, DVec3)> {
         let inv = dir.recip();
-        let mut best: Option<(f64, DVec3)> = None;
+        let mut best: Option<(f64, usize)> = None;
         // A fixed stack: a median-split tree of up to 4 billion triangles is under 64 deep.
         let mut stack = [0usize; 64];
         let mut top = 0;
@@ -156,10 +179,10 @@ impl Mesh {
             }
             let node = self.nodes[n];
             if node.count > 0 {
-                for t in &self.tris[node.first..node.first + node.count] {
-                    match moller_trumbore(origin, dir, t) {
+                for k in node.first..node.first + node.count {
+                    match moller_trumbore(origin, dir, &self.tris[k]) {
                         Some(d) if d > EPS && d < best.map_or(f64::MAX, |b| b.0) => {
-                            best = Some((d, (t[1] - t[0]).cross(t[2] - t[0]).normalize()));
+                            best = Some((d, k));
                         }
                         _ => {}
                     }
@@ -190,10 +213,10 @@ impl Mesh {
                 (None, None) => {}
             }
         }
-        match best {
-            Some((t, n)) => classify(origin, dir, t, n),
-            None => Hit::Miss,
-        }
+        best.map(|(d, k)| {
+            let t = &self.tris[k];
+            (d, self.ids[k], (t[1] - t[0]).cross(t[2] - t[0]).normalize())
+        })
     }
 }
 

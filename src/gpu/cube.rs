@@ -1,0 +1,346 @@
+//! The cube-map pass: the scene drawn from the eye into the faces of a cube map, one render pass
+//! per face with its own depth (seed 000's dynamic cube map). Two optimisations from the seed:
+//! CMF renders only the faces the warp samples (decided exactly from the sampling vectors,
+//! filtering footprint included), and the look-to check skips the update entirely when the eye,
+//! the faces and the scene are what the cube map already shows. The face size is chosen from
+//! the output's finest angular pixel pitch unless given.
+
+use super::Gpu;
+use super::scene::{SKY, Scene, sun};
+use super::warp::CubeTexture;
+use crate::cubemap::{Face, face_point, select};
+use crate::normalmap::NormalMap;
+use bytemuck::{Pod, Zeroable};
+use glam::{DVec3, Mat4, Vec4};
+use rayon::prelude::*;
+use wgpu::util::DeviceExt;
+
+const NEAR: f32 = 0.1;
+const FAR: f32 = 5000.0;
+
+/// `Face` of `shaders/scene.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct FaceUniform {
+    clip: [[f32; 4]; 4],
+    sun: [f32; 4],
+}
+
+/// Clip-space matrix of one face: rows (sc, −tc, depth, |ma|) of the CPU's cube table applied to
+/// P − eye, so that x = sc/|ma|, y = −tc/|ma| (texture rows run down) and depth ∈ [0, 1].
+pub fn face_matrix(face: Face, eye: glam::Vec3) -> Mat4 {
+    let (sc, tc, ma) = match face {
+        Face::PosX => (-Vec4::Z, -Vec4::Y, Vec4::X),
+        Face::NegX => (Vec4::Z, -Vec4::Y, -Vec4::X),
+        Face::PosY => (Vec4::X, Vec4::Z, Vec4::Y),
+        Face::NegY => (Vec4::X, -Vec4::Z, -Vec4::Y),
+        Face::PosZ => (Vec4::X, -Vec4::Y, Vec4::Z),
+        Face::NegZ => (-Vec4::X, -Vec4::Y, -Vec4::Z),
+    };
+    let (a, b) = (FAR / (FAR - NEAR), -FAR * NEAR / (FAR - NEAR));
+    let rows = [sc, -tc, ma * a + Vec4::W * b, ma];
+    Mat4::from_cols(rows[0], rows[1], rows[2], rows[3]).transpose() * Mat4::from_translation(-eye)
+}
+
+/// The faces a bilinear lookup along any valid vector of `map` reads on a cube of `size`:
+/// the face each vector selects, and a neighbour wherever its footprint crosses an edge.
+pub fn faces_sampled(map: &NormalMap, size: u32) -> [bool; 6] {
+    let n = f64::from(size);
+    let (w, h) = (map.width(), map.height());
+    let sets: Vec<u8> = (0..h)
+        .into_par_iter()
+        .map(|j| {
+            let mut set = 0u8;
+            for i in 0..w {
+                let Some(v) = map.direction(i, j) else {
+                    continue;
+                };
+                let (face, s, t) = select(v);
+                set |= 1 << face.index();
+                // The footprint spans texel centres x and x + 1 (likewise y); where it
+                // leaves the face it reads the neighbour across that edge.
+                let (x, y) = (s * n - 0.5, t * n - 0.5);
+                let (xi, yi) = (x.clamp(0.0, n - 1.0) + 0.5, y.clamp(0.0, n - 1.0) + 0.5);
+                let mut beyond = Vec::new();
+                if x < 0.0 {
+                    beyond.push((-0.5, yi));
+                }
+                if x > n - 1.0 {
+                    beyond.push((n + 0.5, yi));
+                }
+                if y < 0.0 {
+                    beyond.push((xi, -0.5));
+                }
+                if y > n - 1.0 {
+                    beyond.push((xi, n + 0.5));
+                }
+                for (bx, by) in beyond {
+                    set |= 1 << select(face_point(face, bx / n, by / n)).0.index();
+                }
+            }
+            set
+        })
+        .collect();
+    let all = sets.iter().fold(0u8, |a, b| a | b);
+    Face::ALL.map(|f| all & (1 << f.index()) != 0)
+}
+
+/// The smallest face size (a multiple of 16, 64 to `max`) whose texels at the face centres
+/// are no larger than the output's finer pixels (the 10th percentile of the angle between
+/// neighbouring sampling vectors): a finer cube map would add nothing the output can show.
+pub fn face_size_for(map: &NormalMap, max: u32) -> u32 {
+    let (w, h) = (map.width(), map.height());
+    let mut pitch: Vec<f64> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            (0..w.saturating_sub(1)).filter_map(move |i| {
+                let (a, b) = (map.direction(i, j)?, map.direction(i + 1, j)?);
+                Some(a.angle_between(b))
+            })
+        })
+        .filter(|a| *a > 0.0)
+        .collect();
+    if pitch.is_empty() {
+        return 64;
+    }
+    pitch.sort_by(f64::total_cmp);
+    let fine = pitch[pitch.len() / 10];
+    // A centre texel of a size-N face spans 2/N radians.
+    let n = (2.0 / fine).ceil() as u32;
+    (n.div_ceil(16) * 16).clamp(64, max)
+}
+
+pub struct CubePass {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    positions: wgpu::Buffer,
+    colors: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    count: u32,
+    /// What the target shows now: eye, size, faces (the look-to check).
+    shown: Option<([f32; 3], u32, [bool; 6])>,
+    /// Faces drawn since creation (for tests and benchmarks).
+    pub faces_drawn: u64,
+}
+
+impl CubePass {
+    pub fn new(gpu: &Gpu, scene: &Scene) -> Self {
+        let module = gpu
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("scene"),
+                source: wgpu::ShaderSource::Wgsl(super::SCENE_WGSL.into()),
+            });
+        let layout = gpu
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("face"),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }],
+            });
+        let pl = gpu
+            .device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: None,
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+        let pipeline = gpu
+            .device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("scene"),
+                layout: Some(&pl),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[
+                        Some(wgpu::VertexBufferLayout {
+                            array_stride: 12,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                        }),
+                        Some(wgpu::VertexBufferLayout {
+                            array_stride: 4,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &wgpu::vertex_attr_array![1 => Unorm8x4],
+                        }),
+                    ],
+                },
+                // The face matrices mirror (the table is left-handed): draw both sides.
+                primitive: wgpu::PrimitiveState {
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: wgpu::TextureFormat::Depth32Float,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: wgpu::TextureFormat::Rgba8Unorm,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+        let buffer = |bytes: &[u8], usage| {
+            gpu.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: None,
+                    contents: bytes,
+                    usage,
+                })
+        };
+        CubePass {
+            pipeline,
+            layout,
+            positions: buffer(
+                bytemuck::cast_slice(&scene.positions),
+                wgpu::BufferUsages::VERTEX,
+            ),
+            colors: buffer(
+                bytemuck::cast_slice(&scene.colors),
+                wgpu::BufferUsages::VERTEX,
+            ),
+            indices: buffer(
+                bytemuck::cast_slice(&scene.indices),
+                wgpu::BufferUsages::INDEX,
+            ),
+            count: scene.indices.len() as u32,
+            shown: None,
+            faces_drawn: 0,
+        }
+    }
+
+    /// Draws the scene from `eye` into the `faces` of `target` (the others are cleared to
+    /// magenta, which no correct warp shows); returns false when the target already shows
+    /// exactly this and nothing was drawn.
+    pub fn render(
+        &mut self,
+        gpu: &Gpu,
+        target: &CubeTexture,
+        eye: DVec3,
+        faces: [bool; 6],
+    ) -> bool {
+        let key = (eye.as_vec3().to_array(), target.size, faces);
+        if self.shown == Some(key) {
+            return false;
+        }
+        let depth = gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("depth"),
+            size: wgpu::Extent3d {
+                width: target.size,
+                height: target.size,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Depth32Float,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        let depth_view = depth.create_view(&Default::default());
+        let srgb = |v: u8| f64::from(v) / 255.0;
+        let sky = wgpu::Color {
+            r: srgb(SKY[0]),
+            g: srgb(SKY[1]),
+            b: srgb(SKY[2]),
+            a: 1.0,
+        };
+        let magenta = wgpu::Color {
+            r: 1.0,
+            g: 0.0,
+            b: 1.0,
+            a: 1.0,
+        };
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut keep = Vec::new();
+        for face in Face::ALL {
+            let draw = faces[face.index()];
+            let layer = target.texture.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2),
+                base_array_layer: face.index() as u32,
+                array_layer_count: Some(1),
+                ..Default::default()
+            });
+            let uniform = FaceUniform {
+                clip: face_matrix(face, eye.as_vec3()).to_cols_array_2d(),
+                sun: sun().extend(0.0).to_array(),
+            };
+            let buf = gpu
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: None,
+                    contents: bytemuck::bytes_of(&uniform),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+            let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: buf.as_entire_binding(),
+                }],
+            });
+            {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("cube face"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &layer,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(if draw { sky } else { magenta }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if draw {
+                    pass.set_pipeline(&self.pipeline);
+                    pass.set_bind_group(0, &bind, &[]);
+                    pass.set_vertex_buffer(0, self.positions.slice(..));
+                    pass.set_vertex_buffer(1, self.colors.slice(..));
+                    pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..self.count, 0, 0..1);
+                    self.faces_drawn += 1;
+                }
+            }
+            keep.push(buf);
+        }
+        gpu.queue.submit([enc.finish()]);
+        self.shown = Some(key);
+        true
+    }
+}

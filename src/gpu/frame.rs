@@ -1,0 +1,263 @@
+//! One frame of a 3D scene through a projection: cube-map pass, then warp pass, on the GPU or,
+//! without one, on the CPU (ray-cast cube map, CPU warp, the same blur). The driver the CLI and
+//! the benchmark share.
+
+use super::cube::{CubePass, face_size_for, faces_sampled};
+use super::scene::{RayCaster, Scene};
+use super::warp::{Blur, CubeTexture, ProjectionUniform, Source, WarpPass};
+use super::{Gpu, Renderer};
+use crate::content::Content;
+use crate::cubemap::CubeMap;
+use crate::error::{Error, Result};
+use crate::normalmap::NormalMap;
+use crate::projection::View;
+use crate::raster::Raster;
+use crate::render::{self, Filter, Warp};
+use glam::DVec3;
+
+#[derive(Debug, Clone, Copy)]
+pub struct FrameOptions {
+    pub size: (u32, u32),
+    /// Cube face size; `None` picks it from the output ([`face_size_for`]).
+    pub face: Option<u32>,
+    /// Render only the faces the warp samples (seed 000's CMF).
+    pub cmf: bool,
+    pub blur: Option<Blur>,
+    pub eye: DVec3,
+}
+
+/// What a frame did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameReport {
+    pub face: u32,
+    pub faces: [bool; 6],
+    /// False when the look-to check found the cube map already current.
+    pub cube_updated: bool,
+}
+
+enum Backend {
+    Gpu {
+        gpu: Box<Gpu>,
+        warp: WarpPass,
+        cube: CubePass,
+        target: Option<CubeTexture>,
+    },
+    Cpu {
+        caster: Box<RayCaster>,
+        cached: Option<CpuCube>,
+    },
+}
+
+/// The CPU's cube map and the (eye, face size) it shows.
+type CpuCube = (([f32; 3], u32), CubeMap<[u8; 4]>);
+
+/// Face size and faces decided for a view (they change only with the view).
+type Plan = (Vec<u8>, Option<u32>, bool, (u32, [bool; 6]));
+
+pub struct SceneRenderer {
+    backend: Backend,
+    plan: Option<Plan>,
+}
+
+/// Largest face the CPU ray caster is asked for (6 × 2048² rays is already minutes).
+const CPU_MAX_FACE: u32 = 2048;
+
+impl SceneRenderer {
+    /// `Auto` takes the GPU when an adapter exists and says once (stderr) when it falls back.
+    pub fn new(scene: Scene, renderer: Renderer, adapter: Option<&str>) -> Result<Self> {
+        let gpu = match renderer {
+            Renderer::Cpu => None,
+            Renderer::Gpu => Some(Gpu::new(adapter)?.ok_or_else(|| {
+                Error::invalid(
+                    "renderer",
+                    "no GPU adapter (not even lavapipe: apt-get install mesa-vulkan-drivers); use --renderer cpu",
+                )
+            })?),
+            Renderer::Auto => {
+                let g = Gpu::new(adapter)?;
+                if g.is_none() {
+                    eprintln!("no GPU adapter: rendering on the CPU");
+                }
+                g
+            }
+        };
+        let backend = match gpu {
+            Some(gpu) => {
+                let warp = WarpPass::new(&gpu);
+                let cube = CubePass::new(&gpu, &scene);
+                Backend::Gpu {
+                    gpu: Box::new(gpu),
+                    warp,
+                    cube,
+                    target: None,
+                }
+            }
+            None => Backend::Cpu {
+                caster: Box::new(scene.ray_caster()?),
+                cached: None,
+            },
+        };
+        Ok(SceneRenderer {
+            backend,
+            plan: None,
+        })
+    }
+
+    /// The adapter's description, or "CPU".
+    pub fn describe(&self) -> String {
+        match &self.backend {
+            Backend::Gpu { gpu, .. } => gpu.describe(),
+            Backend::Cpu { .. } => "CPU (ray-cast cube map, CPU warp)".into(),
+        }
+    }
+
+    /// Faces drawn by the GPU so far (0 on the CPU).
+    pub fn faces_drawn(&self) -> u64 {
+        match &self.backend {
+            Backend::Gpu { cube, .. } => cube.faces_drawn,
+            Backend::Cpu { .. } => 0,
+        }
+    }
+
+    pub fn frame(
+        &mut self,
+        view: &View,
+        o: &FrameOptions,
+    ) -> Result<(Raster<[u8; 4]>, FrameReport)> {
+        let (w, h) = o.size;
+        let max = match &self.backend {
+            Backend::Gpu { gpu, .. } => gpu.device.limits().max_texture_dimension_2d.min(8192),
+            Backend::Cpu { .. } => CPU_MAX_FACE,
+        };
+        if let Some(f) = o.face
+            && !(8..=max).contains(&f)
+        {
+            return Err(Error::invalid(
+                "face",
+                format!("must be 8–{max} on this renderer, got {f}"),
+            ));
+        }
+        // The view's sampling vectors decide the face size and the faces; they are computed
+        // once per view, not per frame.
+        let key = bytemuck::bytes_of(&ProjectionUniform::of(view, w, h)).to_vec();
+        let (face, faces) = match &self.plan {
+            Some((k, f, c, decided)) if *k == key && *f == o.face && *c == o.cmf => *decided,
+            _ => {
+                let decided = if let (Some(face), false) = (o.face, o.cmf) {
+                    (face, [true; 6])
+                } else {
+                    let map = NormalMap::from_view(view, w, h)?;
+                    let face = o.face.unwrap_or_else(|| face_size_for(&map, max));
+                    let faces = if o.cmf {
+                        faces_sampled(&map, face)
+                    } else {
+                        [true; 6]
+                    };
+                    (face, faces)
+                };
+                self.plan = Some((key, o.face, o.cmf, decided));
+                decided
+            }
+        };
+        match &mut self.backend {
+            Backend::Gpu {
+                gpu,
+                warp,
+                cube,
+                target,
+            } => {
+                if target.as_ref().is_none_or(|t| t.size != face) {
+                    *target = Some(CubeTexture::target(gpu, face));
+                }
+                let t = target.as_ref().expect("set above");
+                let updated = cube.render(gpu, t, o.eye, faces);
+                let img = warp.render(gpu, t, Source::View(view), (w, h), None, o.blur)?;
+                Ok((
+                    img,
+                    FrameReport {
+                        face,
+                        faces,
+                        cube_updated: updated,
+                    },
+                ))
+            }
+            Backend::Cpu { caster, cached } => {
+                let key = (o.eye.as_vec3().to_array(), face);
+                let updated = cached.as_ref().is_none_or(|c| c.0 != key);
+                if updated {
+                    *cached = Some((key, caster.cube(o.eye, face as usize)));
+                }
+                let cube = &cached.as_ref().expect("set above").1;
+                let mut img = render::render(
+                    Warp::View(view),
+                    &Content::cube(cube),
+                    w,
+                    h,
+                    1,
+                    Filter::Bilinear,
+                )?;
+                if let Some(b) = o.blur {
+                    img = radial_blur(&img, b);
+                }
+                Ok((
+                    img,
+                    FrameReport {
+                        face,
+                        faces: [true; 6],
+                        cube_updated: updated,
+                    },
+                ))
+            }
+        }
+    }
+}
+
+/// `shaders/blur.wgsl` on the CPU: each pixel averages `samples` bilinear taps on the way to
+/// the image centre (edges clamped, as the GPU sampler does).
+pub fn radial_blur(img: &Raster<[u8; 4]>, b: Blur) -> Raster<[u8; 4]> {
+    use rayon::prelude::*;
+    let (w, h) = (img.width, img.height);
+    let tap = |x: f32, y: f32| -> [f32; 4] {
+        let (x, y) = (x - 0.5, y - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let at = |i: f32, j: f32| {
+            let (i, j) = (
+                i.clamp(0.0, (w - 1) as f32) as usize,
+                j.clamp(0.0, (h - 1) as f32) as usize,
+            );
+            img.data[j * w + i].map(f32::from)
+        };
+        let (a, bb, c, d) = (
+            at(x0, y0),
+            at(x0 + 1.0, y0),
+            at(x0, y0 + 1.0),
+            at(x0 + 1.0, y0 + 1.0),
+        );
+        [0, 1, 2, 3].map(|k| {
+            (a[k] * (1.0 - fx) + bb[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+        })
+    };
+    let n = b.samples.max(1);
+    let data = (0..w * h)
+        .into_par_iter()
+        .map(|p| {
+            let (x, y) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+            let (tx, ty) = (w as f32 / 2.0 - x, h as f32 / 2.0 - y);
+            let mut sum = [0.0f32; 4];
+            for k in 0..n {
+                let along = b.strength * k as f32 / n as f32;
+                let v = tap(x + tx * along, y + ty * along);
+                for c in 0..4 {
+                    sum[c] += v[c];
+                }
+            }
+            sum.map(|v| (v / n as f32).round().clamp(0.0, 255.0) as u8)
+        })
+        .collect();
+    Raster {
+        width: w,
+        height: h,
+        data,
+    }
+}
