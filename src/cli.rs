@@ -33,6 +33,8 @@ pub struct Cli {
 enum Command {
     /// Run the daemon: the rig over HTTP/JSON on 127.0.0.1:7878 (see api/openapi.yaml).
     Serve(crate::serve_cmd::ServeArgs),
+    /// Write the procedural city as glTF (.gltf + .bin, or .glb).
+    Scene(crate::scene_cmd::SceneExportArgs),
     /// Time 3D scenes through the GPU renderer against cube-face size, with and without CMF,
     /// beside the CPU reference (seed 000, Figure 8).
     GpuBench(crate::scene_cmd::GpuBenchArgs),
@@ -380,6 +382,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Serve(a) => crate::serve_cmd::run(a),
         Command::ServeBench(a) => crate::serve_bench::run(a),
         Command::GpuBench(a) => crate::scene_cmd::bench(a),
+        Command::Scene(a) => crate::scene_cmd::export(a),
         Command::Render(a) => render_cmd(*a),
         Command::NormalMap(a) => {
             let (w, h) = a.size;

@@ -1116,3 +1116,52 @@ fn render_draws_a_scene_on_the_gpu_and_the_cpu() {
     ]);
     assert!(!ok && err.contains("--content"), "{err}");
 }
+
+#[test]
+fn the_city_written_as_gltf_renders_exactly_like_the_built_in_one() {
+    let s = Scene::new();
+    for out in ["city.gltf", "city.glb"] {
+        let (ok, err) = s.run(&["scene", "--city", "small", "--out", out]);
+        assert!(ok, "{err}");
+    }
+    assert!(s.path("city.bin").exists());
+    let render = |scene: &str, out: &str| {
+        let scene = if scene.starts_with("city:") {
+            scene.to_string()
+        } else {
+            s.path(scene).to_str().unwrap().to_string()
+        };
+        s.run(&[
+            "render",
+            "--scene",
+            &scene,
+            "--projection",
+            "cylindrical",
+            "--hfov",
+            "270",
+            "--vfov",
+            "90",
+            "--size",
+            "384x128",
+            "--renderer",
+            "gpu",
+            "--out",
+            out,
+        ])
+    };
+    for (scene, out) in [
+        ("city:small", "a.png"),
+        ("city.gltf", "b.png"),
+        ("city.glb", "c.png"),
+    ] {
+        let (ok, err) = render(scene, out);
+        assert!(ok, "{scene}: {err}");
+    }
+    let a = std::fs::read(s.path("a.png")).unwrap();
+    assert_eq!(a, std::fs::read(s.path("b.png")).unwrap(), "gltf");
+    assert_eq!(a, std::fs::read(s.path("c.png")).unwrap(), "glb");
+    let (ok, err) = s.run(&["scene", "--city", "tiny", "--out", "x.gltf"]);
+    assert!(!ok && err.contains("--city"), "{err}");
+    let (ok, err) = s.run(&["scene", "--out", "x.fbx"]);
+    assert!(!ok && err.contains("--out"), "{err}");
+}

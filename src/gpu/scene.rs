@@ -287,6 +287,54 @@ impl Scene {
         Ok(s)
     }
 
+    /// The scene as glTF 2.0: one mesh, positions, COLOR_0 (normalised bytes) and u32 indices in
+    /// one buffer. Returns the JSON with the buffer at `uri`, and the buffer; for a `.glb`
+    /// pass `None` and join them with [`glb`].
+    pub fn to_gltf(&self, uri: Option<&str>) -> (String, Vec<u8>) {
+        let mut bin: Vec<u8> = Vec::new();
+        bin.extend(
+            self.positions
+                .iter()
+                .flatten()
+                .flat_map(|v| v.to_le_bytes()),
+        );
+        let colors_at = bin.len();
+        bin.extend(self.colors.iter().flatten());
+        let indices_at = bin.len();
+        bin.extend(self.indices.iter().flat_map(|i| i.to_le_bytes()));
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for p in &self.positions {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let n = self.positions.len();
+        let mut buffer = serde_json::json!({"byteLength": bin.len()});
+        if let Some(u) = uri {
+            buffer["uri"] = u.into();
+        }
+        let json = serde_json::json!({
+            "asset": {"version": "2.0", "generator": "omniwarp"},
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "COLOR_0": 1}, "indices": 2}]}],
+            "buffers": [buffer],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": colors_at, "target": 34962},
+                {"buffer": 0, "byteOffset": colors_at, "byteLength": indices_at - colors_at, "target": 34962},
+                {"buffer": 0, "byteOffset": indices_at, "byteLength": bin.len() - indices_at, "target": 34963}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": n, "type": "VEC3", "min": lo, "max": hi},
+                {"bufferView": 1, "componentType": 5121, "normalized": true, "count": n, "type": "VEC4"},
+                {"bufferView": 2, "componentType": 5125, "count": self.indices.len(), "type": "SCALAR"}
+            ]
+        });
+        (json.to_string(), bin)
+    }
+
     /// The CPU's way to see the scene: its triangles in a BVH, built once.
     pub fn ray_caster(&self) -> Result<RayCaster> {
         let p = |i: u32| Vec3::from_array(self.positions[i as usize]).as_dvec3();
@@ -304,6 +352,29 @@ impl Scene {
                 .collect(),
         })
     }
+}
+
+/// A binary glTF: the JSON and the buffer as two chunks, each padded to 4 bytes.
+pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+    let pad = |mut v: Vec<u8>, with: u8| {
+        while !v.len().is_multiple_of(4) {
+            v.push(with);
+        }
+        v
+    };
+    let (j, b) = (pad(json.as_bytes().to_vec(), b' '), pad(bin.to_vec(), 0));
+    let total = 12 + 8 + j.len() + 8 + b.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend((total as u32).to_le_bytes());
+    out.extend((j.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(j);
+    out.extend((b.len() as u32).to_le_bytes());
+    out.extend(b"BIN\0");
+    out.extend(b);
+    out
 }
 
 pub struct RayCaster {
