@@ -288,6 +288,24 @@ async fn tile_screens_follow_the_geometry_until_edited_and_patch_atomically() {
         ),
         ("\"4\"", Some(false))
     );
+    // A damaged channel file is reported and the previous good revision is served.
+    std::fs::write(dir.path().join("channels/left.json"), "{ torn").unwrap();
+    let fallback = state(Some(dir.path()), None);
+    let (_, h, _) = call(&fallback, get("/v1/channels/left/tiles")).await;
+    assert_eq!(h[header::ETAG], "\"3\"", "from channels/left.json.prev");
+    drop(fallback);
+    let again = state(Some(dir.path()), None);
+    let (st, _, _) = call(
+        &again,
+        write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(3),
+            edits(serde_json::json!([{"op": "reset"}])),
+        ),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "editing on from the recovered revision");
 
     // DELETE goes back to the exact geometry.
     let (st, _, _) = call(
