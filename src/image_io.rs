@@ -169,19 +169,9 @@ pub fn atomic_write(
 
 /// Writes an 8-bit RGBA PNG.
 pub fn write_png(path: &Path, img: &Raster<[u8; 4]>) -> Result<()> {
-    let bytes: Vec<u8> = img.data.iter().flatten().copied().collect();
+    let bytes = png_bytes(img)?;
     atomic_write(path, |f| {
-        let mut w = BufWriter::new(f);
-        let enc = image::codecs::png::PngEncoder::new(&mut w);
-        image::ImageEncoder::write_image(
-            enc,
-            &bytes,
-            img.width as u32,
-            img.height as u32,
-            image::ExtendedColorType::Rgba8,
-        )
-        .map_err(|e| crate::Error::file(path, e))?;
-        w.flush().map_err(|e| crate::Error::file(path, e))
+        f.write_all(&bytes).map_err(|e| Error::file(path, e))
     })
 }
 

@@ -117,6 +117,8 @@ pub struct CubePass {
     colors: wgpu::Buffer,
     indices: wgpu::Buffer,
     count: u32,
+    /// The depth buffer, kept while the face size stays.
+    depth: Option<(u32, wgpu::TextureView)>,
     /// What the target shows now: eye, size, faces (the look-to check).
     shown: Option<([f32; 3], u32, [bool; 6])>,
     /// Faces drawn since creation (for tests and benchmarks).
@@ -225,6 +227,7 @@ impl CubePass {
                 wgpu::BufferUsages::INDEX,
             ),
             count: scene.indices.len() as u32,
+            depth: None,
             shown: None,
             faces_drawn: 0,
         }
@@ -244,21 +247,24 @@ impl CubePass {
         if self.shown == Some(key) {
             return false;
         }
-        let depth = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("depth"),
-            size: wgpu::Extent3d {
-                width: target.size,
-                height: target.size,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Depth32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
-        let depth_view = depth.create_view(&Default::default());
+        if self.depth.as_ref().is_none_or(|d| d.0 != target.size) {
+            let depth = gpu.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("depth"),
+                size: wgpu::Extent3d {
+                    width: target.size,
+                    height: target.size,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Depth32Float,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            });
+            self.depth = Some((target.size, depth.create_view(&Default::default())));
+        }
+        let depth_view = &self.depth.as_ref().expect("set above").1;
         let srgb = |v: u8| f64::from(v) / 255.0;
         let sky = wgpu::Color {
             r: srgb(SKY[0]),
@@ -316,7 +322,7 @@ impl CubePass {
                         },
                     })],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_view,
+                        view: depth_view,
                         depth_ops: Some(wgpu::Operations {
                             load: wgpu::LoadOp::Clear(1.0),
                             store: wgpu::StoreOp::Discard,

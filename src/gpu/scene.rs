@@ -217,15 +217,8 @@ impl Scene {
 
     /// An OBJ file's triangles, in one grey.
     pub fn read_obj(path: &Path) -> Result<Scene> {
-        let mesh = Mesh::read_obj(path)?;
         let mut s = Scene::default();
-        // The mesh keeps each triangle's original index; restore the file's order.
-        let mut tris: Vec<(u32, [DVec3; 3])> = Vec::with_capacity(mesh.triangles().len());
-        for (k, t) in mesh.triangles().iter().enumerate() {
-            tris.push((mesh.original_index(k), *t));
-        }
-        tris.sort_by_key(|t| t.0);
-        for (_, t) in tris {
+        for t in crate::surface::read_obj_triangles(path)? {
             let base = s.positions.len() as u32;
             s.positions.extend(t.map(|v| v.as_vec3().to_array()));
             s.colors.extend([[200, 200, 200, 255]; 3]);

@@ -71,7 +71,7 @@ pub async fn propose(
     let cal = run_job(&s, move |_| {
         Some(calibrate(&problem, choice).map_err(|e| match e {
             crate::Error::Invalid { name, reason } => ApiError::Invalid {
-                field: format!("/{}", name.replace(['[', '.'], "/").replace(']', "")),
+                field: crate::rig::pointer_of(&name),
                 reason,
             },
             other => ApiError::Internal(other.to_string()),

@@ -45,63 +45,14 @@ impl Mesh {
         Ok(m)
     }
 
-    /// Reads `v` and `f` lines (polygons fanned into triangles; `f 1/2/3 …` and negative
-    /// indices accepted; everything else ignored).
+    /// An OBJ file as a mesh (see [`read_obj_triangles`]).
     pub fn read_obj(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e))?;
-        let mut verts = Vec::new();
-        let mut tris = Vec::new();
-        for (no, line) in text.lines().enumerate() {
-            let mut parts = line.split_whitespace();
-            let bad = |why: &str| Error::file(path, format!("line {}: {why}", no + 1));
-            match parts.next() {
-                Some("v") => {
-                    let c: Vec<f64> = parts
-                        .take(3)
-                        .map(|s| s.parse().map_err(|_| bad("a vertex needs three numbers")))
-                        .collect::<Result<_>>()?;
-                    if c.len() != 3 {
-                        return Err(bad("a vertex needs three numbers"));
-                    }
-                    verts.push(DVec3::new(c[0], c[1], c[2]));
-                }
-                Some("f") => {
-                    let idx: Vec<usize> = parts
-                        .map(|s| {
-                            let i: i64 = s
-                                .split('/')
-                                .next()
-                                .unwrap_or("")
-                                .parse()
-                                .map_err(|_| bad("a face index is not a number"))?;
-                            let i = if i < 0 { verts.len() as i64 + i } else { i - 1 };
-                            usize::try_from(i)
-                                .ok()
-                                .filter(|&i| i < verts.len())
-                                .ok_or_else(|| bad("a face refers to a vertex not yet defined"))
-                        })
-                        .collect::<Result<_>>()?;
-                    if idx.len() < 3 {
-                        return Err(bad("a face needs three vertices"));
-                    }
-                    for k in 1..idx.len() - 1 {
-                        tris.push([verts[idx[0]], verts[idx[k]], verts[idx[k + 1]]]);
-                    }
-                }
-                _ => {}
-            }
-        }
-        Mesh::new(tris).map_err(|e| Error::file(path, e))
+        Mesh::new(read_obj_triangles(path)?).map_err(|e| Error::file(path, e))
     }
 
     /// The triangles in the tree's order.
     pub fn triangles(&self) -> &[[DVec3; 3]] {
         &self.tris
-    }
-
-    /// The index, as given to [`Mesh::new`], of the `k`-th triangle of [`Mesh::triangles`].
-    pub fn original_index(&self, k: usize) -> u32 {
-        self.ids[k]
     }
 
     fn bounds(tris: &[[DVec3; 3]]) -> (DVec3, DVec3) {
@@ -240,4 +191,53 @@ fn moller_trumbore(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<f64> {
         return None;
     }
     Some(e2.dot(q) * inv)
+}
+
+/// The triangles of an OBJ file in file order: `v` and `f` lines (polygons fanned into
+/// triangles; `f 1/2/3 …` and negative indices accepted; everything else ignored).
+pub fn read_obj_triangles(path: &Path) -> Result<Vec<[DVec3; 3]>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e))?;
+    let mut verts = Vec::new();
+    let mut tris = Vec::new();
+    for (no, line) in text.lines().enumerate() {
+        let mut parts = line.split_whitespace();
+        let bad = |why: &str| Error::file(path, format!("line {}: {why}", no + 1));
+        match parts.next() {
+            Some("v") => {
+                let c: Vec<f64> = parts
+                    .take(3)
+                    .map(|s| s.parse().map_err(|_| bad("a vertex needs three numbers")))
+                    .collect::<Result<_>>()?;
+                if c.len() != 3 {
+                    return Err(bad("a vertex needs three numbers"));
+                }
+                verts.push(DVec3::new(c[0], c[1], c[2]));
+            }
+            Some("f") => {
+                let idx: Vec<usize> = parts
+                    .map(|s| {
+                        let i: i64 = s
+                            .split('/')
+                            .next()
+                            .unwrap_or("")
+                            .parse()
+                            .map_err(|_| bad("a face index is not a number"))?;
+                        let i = if i < 0 { verts.len() as i64 + i } else { i - 1 };
+                        usize::try_from(i)
+                            .ok()
+                            .filter(|&i| i < verts.len())
+                            .ok_or_else(|| bad("a face refers to a vertex not yet defined"))
+                    })
+                    .collect::<Result<_>>()?;
+                if idx.len() < 3 {
+                    return Err(bad("a face needs three vertices"));
+                }
+                for k in 1..idx.len() - 1 {
+                    tris.push([verts[idx[0]], verts[idx[k]], verts[idx[k + 1]]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(tris)
 }

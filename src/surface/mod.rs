@@ -9,7 +9,7 @@
 mod mesh;
 mod shapes;
 
-pub use mesh::Mesh;
+pub use mesh::{Mesh, read_obj_triangles};
 pub use shapes::{Cylinder, Dome, Plane};
 
 use crate::error::{Error, Result};
