@@ -13,9 +13,14 @@ pub enum Error {
     /// A direction or screen position lies outside a projection's domain.
     #[error(transparent)]
     Outside(#[from] Outside),
-    /// A file could not be read or written.
+    /// A file could not be read or written. `kind` is the operating system's reason where there
+    /// was one, so callers can tell a missing file from a full disk or a closed pipe.
     #[error("{path}: {reason}")]
-    File { path: PathBuf, reason: String },
+    File {
+        path: PathBuf,
+        reason: String,
+        kind: Option<std::io::ErrorKind>,
+    },
 }
 
 impl Error {
@@ -36,11 +41,23 @@ impl Error {
         }
     }
 
-    /// Shorthand for [`Error::File`].
-    pub fn file(path: impl Into<PathBuf>, reason: impl std::fmt::Display) -> Self {
+    /// Shorthand for [`Error::File`]; an [`std::io::Error`] as the reason keeps its kind.
+    pub fn file(path: impl Into<PathBuf>, reason: impl std::fmt::Display + 'static) -> Self {
+        let kind = (&reason as &dyn std::any::Any)
+            .downcast_ref::<std::io::Error>()
+            .map(std::io::Error::kind);
         Error::File {
             path: path.into(),
             reason: reason.to_string(),
+            kind,
+        }
+    }
+
+    /// The operating system's reason for a failed file operation, if that is what this is.
+    pub fn io_kind(&self) -> Option<std::io::ErrorKind> {
+        match self {
+            Error::File { kind, .. } => *kind,
+            _ => None,
         }
     }
 }

@@ -9,6 +9,7 @@ pub mod content;
 pub mod cubemap;
 pub mod error;
 pub mod export;
+#[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod image_io;
 pub mod lens;
@@ -17,6 +18,8 @@ pub mod projection;
 pub mod raster;
 pub mod render;
 pub mod rig;
+pub mod scene;
+#[cfg(feature = "server")]
 pub mod server;
 pub mod surface;
 pub mod tiles;

@@ -32,7 +32,7 @@ const UNIT_TOLERANCE: f32 = 2e-3;
 impl NormalMap {
     /// Samples a view at every pixel centre of a width × height image.
     pub fn from_view(view: &View, width: u32, height: u32) -> Result<Self> {
-        crate::render::Warp::View(view).check(width, height, 1)?;
+        crate::raster::check_size(width, height, 1)?;
         let (w, h) = (width as usize, height as usize);
         let mut pixels = Raster::new(w, h);
         pixels

@@ -269,7 +269,7 @@ fn the_radial_blur_keeps_the_centre_and_smears_the_edges() {
     let sharp = pass
         .render(&gpu, &tex, Source::View(&view), (256, 128), None, None)
         .unwrap();
-    let blur = gpu::warp::Blur {
+    let blur = omniwarp::render::blur::Blur {
         strength: 0.3,
         samples: 16,
     };

@@ -4,13 +4,13 @@
 
 use glam::DVec3;
 use omniwarp::cubemap::Face;
+use omniwarp::cubemap::coverage::faces_sampled;
 use omniwarp::gpu::Renderer;
-use omniwarp::gpu::cube::faces_sampled;
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
-use omniwarp::gpu::scene::{LANDMARKS, Scene};
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::{self, Params, View};
 use omniwarp::raster::{Raster, psnr};
+use omniwarp::scene::{LANDMARKS, Scene};
 
 fn view(name: &str, params: Params, w: u32, h: u32) -> View {
     View::plain(projection::build(name, &params, f64::from(h) / f64::from(w)).unwrap())
@@ -281,7 +281,7 @@ fn the_cpu_blur_matches_the_gpu_blur() {
     let v = full_sphere(256, 128);
     let eye = DVec3::new(0.0, 1.7, 0.0);
     let mut o = opts((256, 128), Some(128), true, eye);
-    o.blur = Some(omniwarp::gpu::warp::Blur {
+    o.blur = Some(omniwarp::render::blur::Blur {
         strength: 0.25,
         samples: 8,
     });

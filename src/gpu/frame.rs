@@ -2,17 +2,19 @@
 //! without one, on the CPU (ray-cast cube map, CPU warp, the same blur). The driver the CLI and
 //! the benchmark share.
 
-use super::cube::{CubePass, face_size_for, faces_sampled};
-use super::scene::{RayCaster, Scene};
-use super::warp::{Blur, CubeTexture, ProjectionUniform, Source, WarpPass};
+use super::cube::CubePass;
+use super::warp::{CubeTexture, ProjectionUniform, Source, WarpPass};
 use super::{Gpu, Renderer};
 use crate::content::Content;
 use crate::cubemap::CubeMap;
+use crate::cubemap::coverage::{face_size_for, faces_sampled};
 use crate::error::{Error, Result};
 use crate::normalmap::NormalMap;
 use crate::projection::View;
 use crate::raster::Raster;
+use crate::render::blur::{Blur, radial_blur};
 use crate::render::{self, Filter, Warp};
+use crate::scene::{RayCaster, Scene};
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy)]
@@ -209,55 +211,5 @@ impl SceneRenderer {
                 ))
             }
         }
-    }
-}
-
-/// `shaders/blur.wgsl` on the CPU: each pixel averages `samples` bilinear taps on the way to
-/// the image centre (edges clamped, as the GPU sampler does).
-pub fn radial_blur(img: &Raster<[u8; 4]>, b: Blur) -> Raster<[u8; 4]> {
-    use rayon::prelude::*;
-    let (w, h) = (img.width, img.height);
-    let tap = |x: f32, y: f32| -> [f32; 4] {
-        let (x, y) = (x - 0.5, y - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let at = |i: f32, j: f32| {
-            let (i, j) = (
-                i.clamp(0.0, (w - 1) as f32) as usize,
-                j.clamp(0.0, (h - 1) as f32) as usize,
-            );
-            img.data[j * w + i].map(f32::from)
-        };
-        let (a, bb, c, d) = (
-            at(x0, y0),
-            at(x0 + 1.0, y0),
-            at(x0, y0 + 1.0),
-            at(x0 + 1.0, y0 + 1.0),
-        );
-        [0, 1, 2, 3].map(|k| {
-            (a[k] * (1.0 - fx) + bb[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
-        })
-    };
-    let n = b.samples.max(1);
-    let data = (0..w * h)
-        .into_par_iter()
-        .map(|p| {
-            let (x, y) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
-            let (tx, ty) = (w as f32 / 2.0 - x, h as f32 / 2.0 - y);
-            let mut sum = [0.0f32; 4];
-            for k in 0..n {
-                let along = b.strength * k as f32 / n as f32;
-                let v = tap(x + tx * along, y + ty * along);
-                for c in 0..4 {
-                    sum[c] += v[c];
-                }
-            }
-            sum.map(|v| (v / n as f32).round().clamp(0.0, 255.0) as u8)
-        })
-        .collect();
-    Raster {
-        width: w,
-        height: h,
-        data,
     }
 }

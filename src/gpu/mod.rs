@@ -9,7 +9,6 @@
 
 pub mod cube;
 pub mod frame;
-pub mod scene;
 pub mod warp;
 
 use crate::error::{Error, Result};

@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::normalmap::NormalMap;
 use crate::projection::View;
 use crate::raster::Raster;
+use crate::render::blur::Blur;
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
@@ -116,14 +117,6 @@ impl CubeTexture {
         }
         t
     }
-}
-
-/// Seed 000's radial blur: `strength` is the fraction of the way to the centre the blur
-/// reaches, over `samples` taps.
-#[derive(Debug, Clone, Copy)]
-pub struct Blur {
-    pub strength: f32,
-    pub samples: u32,
 }
 
 pub struct WarpPass {

@@ -24,7 +24,7 @@ pub struct CameraModel {
     pub extrinsics: Option<[f64; 6]>,
 }
 
-fn bad(path: &Path, why: impl std::fmt::Display) -> Error {
+fn bad(path: &Path, why: impl std::fmt::Display + 'static) -> Error {
     Error::file(path, why)
 }
 

@@ -6,10 +6,11 @@
 //! The per-frame step reads 8 bytes of plan and 4 texels per output pixel, with integer
 //! arithmetic for 8-bit bilinear output, and runs on all cores (rayon, one task per row).
 
-pub(crate) mod kernel;
+pub mod blur;
 mod plan;
 
-pub use plan::{Plan, Tap};
+pub use crate::raster::{MAX_SAMPLES, Tap, check_size};
+pub use plan::Plan;
 
 use crate::cubemap::{self, Face};
 use crate::error::{Error, Result};
@@ -28,9 +29,6 @@ pub enum Filter {
     /// Catmull–Rom (Keys, a = −0.5) over 4×4 texels.
     Bicubic,
 }
-
-/// The most samples one render may plan: 2 GiB of taps.
-pub const MAX_SAMPLES: u64 = 1 << 28;
 
 /// Where the sampling vector of each output position comes from.
 #[derive(Debug, Clone, Copy)]
@@ -63,28 +61,7 @@ impl Warp<'_> {
 
     /// Checks that this warp can drive a width × height output with k × k supersampling.
     pub fn check(&self, width: u32, height: u32, supersample: u32) -> Result<()> {
-        if width == 0 || height == 0 || width > 32768 || height > 32768 {
-            return Err(Error::invalid(
-                "size",
-                format!("must be between 1×1 and 32768×32768 pixels, got {width}×{height}"),
-            ));
-        }
-        if !(1..=16).contains(&supersample) {
-            return Err(Error::invalid(
-                "supersample",
-                format!("must be between 1 and 16, got {supersample}"),
-            ));
-        }
-        let samples = u64::from(width) * u64::from(height) * u64::from(supersample).pow(2);
-        if samples > MAX_SAMPLES {
-            return Err(Error::invalid(
-                "size",
-                format!(
-                    "{width}×{height} with {supersample}×{supersample} supersampling is {samples} \
-                     samples; at most {MAX_SAMPLES} fit in memory (8 bytes of plan each)"
-                ),
-            ));
-        }
+        check_size(width, height, supersample)?;
         if let Warp::Map(map) = self {
             if supersample != 1 {
                 return Err(Error::invalid(

@@ -3,31 +3,12 @@
 use super::{Filter, Warp, finish, subsample};
 use crate::content::{Atlas, Locate};
 use crate::error::{Error, Result};
-use crate::raster::{Pixel, Raster};
+use crate::raster::{Pixel, Raster, Tap};
 use rayon::prelude::*;
 
 /// Rows per parallel task, and columns per strip within it (see `render_into`).
 const BAND_ROWS: usize = 8;
 const STRIP_COLS: usize = 128;
-
-/// One output sample: the atlas texel at or before the sample position, and the fraction of a
-/// texel beyond it in x and y, in 1/65536 (far below any filter's visible precision).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(C)]
-pub struct Tap {
-    pub idx: u32,
-    pub fx: u16,
-    pub fy: u16,
-}
-
-impl Tap {
-    /// The tap of a sample the content does not cover.
-    pub const NONE: Tap = Tap {
-        idx: u32::MAX,
-        fx: 0,
-        fy: 0,
-    };
-}
 
 /// A warp resolved against one content layout: what every output sample reads.
 #[derive(Debug, Clone)]

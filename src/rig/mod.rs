@@ -21,6 +21,10 @@ use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// The demo rig `omniwarp serve --demo` starts with: the 270° cylinder with three projectors of
+/// `calibration/rigs/cylinder-270-3proj.json`.
+pub const DEMO_RIG: &str = include_str!("../../calibration/rigs/cylinder-270-3proj.json");
+
 /// The rig file as written.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

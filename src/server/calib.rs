@@ -3,8 +3,9 @@
 //! it to the rig with `If-Match` like any other rig edit.
 
 use super::ApiError;
-use super::outputs::run_job;
-use super::state::{AppState, commit_rig, if_match, parse_body, tagged};
+use super::jobs::run_job;
+use super::rig::commit_rig;
+use super::state::{AppState, if_match, parse_body, tagged};
 use super::store::Proposal;
 use crate::calibration::{Correspondence, ModelChoice, Problem, calibrate};
 use crate::lens::Lens;

@@ -4,7 +4,8 @@
 //! size and its measured worst error come back in `X-Omniwarp-Grid` and `X-Omniwarp-Max-Error`.
 
 use super::ApiError;
-use super::outputs::{Job, file, job, run_job};
+use super::jobs::{Job, job, run_job};
+use super::outputs::file;
 use super::state::AppState;
 use crate::export::channel::{Sources, Tolerance};
 use crate::export::mpcdi::{self, Profile, Version};

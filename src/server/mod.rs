@@ -1,14 +1,19 @@
 //! The omniwarp daemon: the rig over HTTP/JSON under `/v1`, revisions with `ETag`/`If-Match`,
 //! per-channel outputs (warp map, blend mask, rendered preview), a change feed (Server-Sent
 //! Events), atomic persistence under the data directory, and a bearer token whenever the
-//! server listens beyond loopback. Every route is listed in [`router`] and in `api/openapi.yaml`.
+//! server listens beyond loopback. Every route is in one table (the `routes!` call below), from which both the router and
+//! [`ROUTES`] are made; `api/openapi.yaml` documents the same routes (a test checks).
 
+mod cache;
 mod calib;
 mod channels;
 pub mod client;
 mod error;
 mod exports;
+mod jobs;
 mod outputs;
+mod preview;
+mod rig;
 mod state;
 mod store;
 
@@ -21,64 +26,53 @@ use axum::extract::{Request, State};
 use axum::http::header::AUTHORIZATION;
 use axum::middleware::{self, Next};
 use axum::response::Response;
-use axum::routing::{get, post};
 use std::future::Future;
 use std::sync::Arc;
 use tokio::net::TcpListener;
 
-/// Every route of the API; `api/openapi.yaml` lists the same (a test checks).
-pub const ROUTES: &[(&str, &str)] = &[
-    ("GET", "/v1/health"),
-    ("GET", "/v1/version"),
-    ("GET", "/v1/rig"),
-    ("PUT", "/v1/rig"),
-    ("GET", "/v1/channels"),
-    ("GET", "/v1/channels/{id}/content"),
-    ("PUT", "/v1/channels/{id}/content"),
-    ("GET", "/v1/channels/{id}/tiles"),
-    ("PUT", "/v1/channels/{id}/tiles"),
-    ("PATCH", "/v1/channels/{id}/tiles"),
-    ("DELETE", "/v1/channels/{id}/tiles"),
-    ("POST", "/v1/channels/{id}/calibration"),
-    ("GET", "/v1/proposals/{pid}"),
-    ("POST", "/v1/proposals/{pid}/apply"),
-    ("GET", "/v1/channels/{id}/warp.exr"),
-    ("GET", "/v1/channels/{id}/blend.png"),
-    ("GET", "/v1/channels/{id}/render"),
-    ("GET", "/v1/channels/{id}/exports/{file}"),
-    ("GET", "/v1/export.mpcdi"),
-    ("GET", "/v1/events"),
-];
+/// The route table, written once: it builds the router and lists every (method, path) in
+/// [`ROUTES`], which `api/openapi.yaml` is checked against, so the two cannot drift.
+macro_rules! routes {
+    ($($path:literal => $first:ident($h:path) $(. $more:ident($hm:path))*;)*) => {
+        /// Every route of the API as (method, path), in the order of the table.
+        pub const ROUTES: &[(&str, &str)] = &[
+            $((routes!(@method $first), $path), $((routes!(@method $more), $path),)*)*
+        ];
+
+        fn table() -> Router<Arc<AppState>> {
+            Router::new()$(.route($path, axum::routing::$first($h)$(.$more($hm))*))*
+        }
+    };
+    (@method get) => { "GET" };
+    (@method put) => { "PUT" };
+    (@method post) => { "POST" };
+    (@method patch) => { "PATCH" };
+    (@method delete) => { "DELETE" };
+}
+
+routes! {
+    "/v1/health" => get(rig::health);
+    "/v1/version" => get(rig::version);
+    "/v1/rig" => get(rig::get_rig).put(rig::put_rig);
+    "/v1/channels" => get(rig::channels);
+    "/v1/channels/{id}/content" => get(channels::get_content).put(channels::put_content);
+    "/v1/channels/{id}/tiles" => get(channels::get_tiles)
+        .put(channels::put_tiles)
+        .patch(channels::patch_tiles)
+        .delete(channels::delete_tiles);
+    "/v1/channels/{id}/calibration" => post(calib::propose);
+    "/v1/proposals/{pid}" => get(calib::get_proposal);
+    "/v1/proposals/{pid}/apply" => post(calib::apply_proposal);
+    "/v1/channels/{id}/warp.exr" => get(outputs::warp);
+    "/v1/channels/{id}/blend.png" => get(outputs::blend);
+    "/v1/channels/{id}/render" => get(outputs::render);
+    "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
+    "/v1/export.mpcdi" => get(exports::mpcdi_package);
+    "/v1/events" => get(rig::events);
+}
 
 pub fn router(state: Arc<AppState>) -> Router {
-    Router::new()
-        .route("/v1/health", get(state::health))
-        .route("/v1/version", get(state::version))
-        .route("/v1/rig", get(state::get_rig).put(state::put_rig))
-        .route("/v1/channels", get(state::channels))
-        .route(
-            "/v1/channels/{id}/content",
-            get(channels::get_content).put(channels::put_content),
-        )
-        .route(
-            "/v1/channels/{id}/tiles",
-            get(channels::get_tiles)
-                .put(channels::put_tiles)
-                .patch(channels::patch_tiles)
-                .delete(channels::delete_tiles),
-        )
-        .route("/v1/channels/{id}/calibration", post(calib::propose))
-        .route("/v1/proposals/{pid}", get(calib::get_proposal))
-        .route("/v1/proposals/{pid}/apply", post(calib::apply_proposal))
-        .route("/v1/channels/{id}/warp.exr", get(outputs::warp))
-        .route("/v1/channels/{id}/blend.png", get(outputs::blend))
-        .route("/v1/channels/{id}/render", get(outputs::render))
-        .route(
-            "/v1/channels/{id}/exports/{file}",
-            get(exports::channel_export),
-        )
-        .route("/v1/export.mpcdi", get(exports::mpcdi_package))
-        .route("/v1/events", get(state::events))
+    table()
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .layer(axum::extract::DefaultBodyLimit::max(state::MAX_BODY))
         .layer(middleware::from_fn_with_state(state.clone(), auth))

@@ -1,28 +1,21 @@
-//! Shared state and the rig routes.
+//! The daemon's shared state, and the helpers every route uses for revisions and bodies.
 //!
 //! The rig lives in memory as an immutable snapshot (`Arc<Rig>`) with a revision; a write
 //! validates the new document, makes it durable and only then swaps the snapshot and answers —
 //! an acknowledged edit survives a crash.
 
 use super::ApiError;
-use super::outputs::{Computed, Geometry};
+use super::cache::{Computed, Geometry, GpuWarp};
 use super::store::Store;
-use crate::rig::Rig;
 use axum::Json;
 use axum::body::Bytes;
-use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, header};
-use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
-use futures_util::Stream;
 use serde::de::DeserializeOwned;
 use std::collections::HashMap;
-use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex};
 use tokio::sync::{Semaphore, broadcast};
-use tokio_stream::StreamExt;
-use tokio_stream::wrappers::BroadcastStream;
 
 /// Largest request body, bytes.
 pub const MAX_BODY: usize = 4 << 20;
@@ -44,7 +37,7 @@ pub struct AppState {
     pub jobs_done: AtomicU64,
     pub jobs_cancelled: AtomicU64,
     /// The GPU for previews (`?renderer=gpu`), opened on first use.
-    pub gpu: std::sync::OnceLock<Option<Arc<super::outputs::GpuWarp>>>,
+    pub gpu: std::sync::OnceLock<Option<Arc<GpuWarp>>>,
 }
 
 impl AppState {
@@ -62,6 +55,11 @@ impl AppState {
         })
     }
 
+    /// The GPU for previews, opened on first use.
+    pub fn gpu(&self) -> Option<Arc<GpuWarp>> {
+        self.gpu.get_or_init(GpuWarp::open).clone()
+    }
+
     pub fn announce(&self, change: serde_json::Value) {
         // Nobody listening is fine.
         let _ = self.events.send(change.to_string());
@@ -77,30 +75,6 @@ pub fn tagged(body: serde_json::Value, revision: u64) -> Response {
     let mut resp = Json(body).into_response();
     resp.headers_mut().insert(header::ETAG, etag(revision));
     resp
-}
-
-pub async fn health(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
-    Json(serde_json::json!({
-        "status": "ok",
-        "workers": {
-            "limit": WORKERS,
-            "free": s.workers.available_permits(),
-            "done": s.jobs_done.load(Ordering::Relaxed),
-            "cancelled": s.jobs_cancelled.load(Ordering::Relaxed),
-        }
-    }))
-}
-
-pub async fn version() -> Json<serde_json::Value> {
-    Json(serde_json::json!({"name": "omniwarp", "version": env!("CARGO_PKG_VERSION"), "api": "v1"}))
-}
-
-pub async fn get_rig(State(s): State<Arc<AppState>>) -> Response {
-    let (rig, revision) = s.store.snapshot();
-    tagged(
-        serde_json::json!({"revision": revision, "rig": rig.doc}),
-        revision,
-    )
 }
 
 /// The revision an edit is based on, from `If-Match`.
@@ -126,73 +100,4 @@ pub fn parse_body<T: DeserializeOwned>(body: &Bytes) -> Result<T, ApiError> {
         field: crate::rig::pointer_of(&e.path().to_string()),
         reason: e.into_inner().to_string(),
     })
-}
-
-/// Makes `rig` the new revision if `wanted` is still current; durable before it returns.
-pub async fn commit_rig(s: &Arc<AppState>, wanted: u64, rig: Rig) -> Result<u64, ApiError> {
-    let _writer = s.store.rig_writer.lock().await;
-    let (_, current) = s.store.snapshot();
-    if wanted != current {
-        return Err(ApiError::Stale { current });
-    }
-    let revision = current + 1;
-    let state = s.clone();
-    let doc = rig.doc.clone();
-    tokio::task::spawn_blocking(move || state.store.save_rig(&doc, revision))
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))??;
-    s.store.install(rig, revision);
-    s.warps
-        .lock()
-        .expect("cache lock")
-        .retain(|k, _| k.1 == revision);
-    s.computed
-        .lock()
-        .expect("cache lock")
-        .retain(|k, _| k.1 == revision);
-    s.announce(serde_json::json!({"kind": "rig", "revision": revision}));
-    tracing::info!(revision, "rig updated");
-    Ok(revision)
-}
-
-pub async fn put_rig(
-    State(s): State<Arc<AppState>>,
-    headers: HeaderMap,
-    body: Bytes,
-) -> Result<Response, ApiError> {
-    let wanted = if_match(&headers)?;
-    let text = std::str::from_utf8(&body).map_err(|_| ApiError::Invalid {
-        field: "/".into(),
-        reason: "the body is not UTF-8".into(),
-    })?;
-    let base = s.store.dir.clone().unwrap_or_else(|| PathBuf::from("."));
-    let rig = Rig::from_json(text, &base)?;
-    let revision = commit_rig(&s, wanted, rig).await?;
-    Ok(tagged(serde_json::json!({"revision": revision}), revision))
-}
-
-pub async fn channels(State(s): State<Arc<AppState>>) -> Response {
-    let (rig, revision) = s.store.snapshot();
-    let list: Vec<_> = rig
-        .channels
-        .iter()
-        .map(|c| serde_json::json!({"id": c.id, "resolution": [c.width, c.height], "lens": c.lens.model().to_string()}))
-        .collect();
-    tagged(
-        serde_json::json!({"revision": revision, "channels": list}),
-        revision,
-    )
-}
-
-/// The change feed: the rig's revision first, then every change as it is made.
-pub async fn events(
-    State(s): State<Arc<AppState>>,
-) -> Sse<impl Stream<Item = Result<Event, std::convert::Infallible>>> {
-    let (_, now) = s.store.snapshot();
-    let first = serde_json::json!({"kind": "rig", "revision": now}).to_string();
-    let first = tokio_stream::once(Ok(Event::default().event("change").data(first)));
-    let rest = BroadcastStream::new(s.events.subscribe())
-        .filter_map(|r| r.ok())
-        .map(|c| Ok(Event::default().event("change").data(c)));
-    Sse::new(first.chain(rest)).keep_alive(KeepAlive::default())
 }

@@ -1,8 +1,8 @@
-//! `omniwarp bench`: steady-state throughput of the CPU warp (the plan built once, then frames
+//! `omniwarp bench warp`: steady-state throughput of the CPU warp (the plan built once, then frames
 //! rendered into one buffer, as a media server runs it), the machine's memory bandwidth, and
 //! the bound that bandwidth puts on the warp.
 
-use crate::cli::ProjectionArgs;
+use super::super::args::{ProjectionArgs, parse_size};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::content::Content;
@@ -20,7 +20,7 @@ pub struct BenchArgs {
     #[command(flatten)]
     projection: ProjectionArgs,
     /// Output size WxH in pixels.
-    #[arg(long, value_parser = crate::cli::parse_size, default_value = "1920x1080")]
+    #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
     size: (u32, u32),
     /// Face size of the procedural cube map used as content, pixels.
     #[arg(long, default_value_t = 1024)]

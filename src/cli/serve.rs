@@ -7,9 +7,6 @@ use omniwarp::server::{AppState, Store, launch};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-/// The demo rig: the 270° cylinder with three projectors from calibration/rigs/.
-pub const DEMO_RIG: &str = include_str!("../calibration/rigs/cylinder-270-3proj.json");
-
 #[derive(Args)]
 pub struct ServeArgs {
     /// Where the rig is kept (rig.json, written atomically). Without it nothing is persisted.
@@ -53,7 +50,10 @@ pub fn run(a: ServeArgs) -> Result<()> {
         );
     }
     let initial = if a.demo {
-        Some(serde_json::from_str::<RigDoc>(DEMO_RIG).context("the built-in demo rig")?)
+        Some(
+            serde_json::from_str::<RigDoc>(omniwarp::rig::DEMO_RIG)
+                .context("the built-in demo rig")?,
+        )
     } else {
         None
     };

@@ -1,5 +1,6 @@
 //! `omniwarp calibrate`: measured correspondences in, a rig channel out.
 
+use super::args::named;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::calibration::{Correspondence, ModelChoice, Problem, calibrate};
@@ -39,13 +40,6 @@ struct Input {
     lens: Option<LensDoc>,
 }
 
-fn reason(e: omniwarp::Error) -> String {
-    match e {
-        omniwarp::Error::Invalid { name, reason } => format!("{name}: {reason}"),
-        other => other.to_string(),
-    }
-}
-
 pub fn run(a: CalibrateArgs) -> Result<()> {
     let text = std::fs::read_to_string(&a.correspondences)
         .with_context(|| format!("--correspondences {}", a.correspondences.display()))?;
@@ -57,10 +51,10 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
             let model: LensModel = l
                 .model
                 .parse()
-                .map_err(|e| anyhow::anyhow!("--correspondences: lens.{}", reason(e)))?;
+                .map_err(|e| anyhow::anyhow!("--correspondences: lens.{}", named(e)))?;
             Some(
                 Lens::new(model, l.intrinsics.clone())
-                    .map_err(|e| anyhow::anyhow!("--correspondences: lens.{}", reason(e)))?,
+                    .map_err(|e| anyhow::anyhow!("--correspondences: lens.{}", named(e)))?,
             )
         }
         None => None,
@@ -69,7 +63,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         "auto" => ModelChoice::Auto,
         m => ModelChoice::Fixed(
             m.parse()
-                .map_err(|e| anyhow::anyhow!("--model: {}", reason(e)))?,
+                .map_err(|e| anyhow::anyhow!("--model: {}", named(e)))?,
         ),
     };
     if a.intrinsics_fixed && lens.is_none() {
@@ -82,7 +76,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         intrinsics_fixed: a.intrinsics_fixed,
     };
     let cal = calibrate(&problem, choice)
-        .map_err(|e| anyhow::anyhow!("--correspondences: {}", reason(e)))?;
+        .map_err(|e| anyhow::anyhow!("--correspondences: {}", named(e)))?;
     let fit = &cal.fit;
     for c in &cal.considered {
         eprintln!(
@@ -109,84 +103,5 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         f.write_all(json.as_bytes())
             .map_err(|e| omniwarp::Error::file(&a.out, e))
     })?;
-    Ok(())
-}
-
-/// Calibration time against point count and model.
-pub fn bench() -> Result<()> {
-    use glam::{DMat3, DVec3};
-    use omniwarp::surface::{Cylinder, Screen};
-    use std::time::Instant;
-    let screen = Screen::Cylinder(Cylinder {
-        radius: 2.5,
-        centre: [0.0; 3],
-        axis: [0.0, 1.0, 0.0],
-        height: [-3.0, 3.0],
-        arc: [-180.0, 180.0],
-    });
-    let truth = Lens::new(
-        LensModel::OpenCv(5),
-        vec![
-            1500.0, 1495.0, 955.0, 560.0, -0.08, 0.03, 0.0008, -0.0005, -0.01,
-        ],
-    )?;
-    let f = DVec3::new(0.3, 0.2, -1.0).normalize();
-    let r = f.cross(DVec3::Y).normalize();
-    let rot = DMat3::from_cols(r, f.cross(r), f);
-    let pos = DVec3::new(0.2, -0.3, 0.4);
-    println!(
-        "{:>6} {:>10} {:>10} {:>10} {:>10}",
-        "points", "PINHOLE", "OPENCV4", "OPENCV5", "OPENCV8"
-    );
-    for n in [50usize, 500, 5000] {
-        let side = (n as f64 * 16.0 / 9.0).sqrt().ceil() as usize;
-        let mut points = Vec::new();
-        let mut k = 0u64;
-        'outer: for j in 0..side {
-            for i in 0..side {
-                if points.len() == n {
-                    break 'outer;
-                }
-                let q = [
-                    20.0 + 1880.0 * (i as f64 + 0.5) / side as f64,
-                    20.0 + 1040.0 * (j as f64 + 0.5) * 16.0 / 9.0 / side as f64,
-                ];
-                if q[1] > 1060.0 {
-                    continue;
-                }
-                k = k.wrapping_mul(6364136223846793005).wrapping_add(1);
-                let noise = ((k >> 40) as f64 / (1u64 << 24) as f64 - 0.5) * 0.6;
-                if let Some(p) = truth
-                    .unproject(q)
-                    .ok()
-                    .and_then(|ray| screen.intersect(pos, rot * ray).point())
-                {
-                    points.push(Correspondence {
-                        pixel: [q[0] + noise, q[1] - noise],
-                        world: p.to_array(),
-                    });
-                }
-            }
-        }
-        let problem = Problem {
-            resolution: [1920, 1080],
-            points,
-            lens: None,
-            intrinsics_fixed: false,
-        };
-        let mut row = format!("{:>6}", problem.points.len());
-        for model in [
-            LensModel::Pinhole,
-            LensModel::OpenCv(4),
-            LensModel::OpenCv(5),
-            LensModel::OpenCv(8),
-        ] {
-            let t = Instant::now();
-            calibrate(&problem, ModelChoice::Fixed(model))
-                .map_err(|e| anyhow::anyhow!("{}", reason(e)))?;
-            row += &format!(" {:>8.1}ms", t.elapsed().as_secs_f64() * 1e3);
-        }
-        println!("{row}");
-    }
     Ok(())
 }

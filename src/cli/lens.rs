@@ -15,8 +15,6 @@ pub enum LensCommand {
     /// Pixels (a JSON array of [u, v]) → a JSON array of unit rays [x, y, z], `null` where a
     /// pixel does not unproject.
     Unproject(UnprojectArgs),
-    /// Project and unproject throughput per model, points per second, one thread and all cores.
-    Bench,
 }
 
 #[derive(Args)]
@@ -80,7 +78,6 @@ fn read_input(flag: &str, source: &str) -> Result<String> {
 
 pub fn run(cmd: LensCommand) -> Result<()> {
     let out: Vec<Option<Vec<f64>>> = match cmd {
-        LensCommand::Bench => return bench(),
         LensCommand::Project(a) => {
             let lens = a.lens.lens()?;
             let points: Vec<[f64; 3]> = serde_json::from_str(&read_input("points", &a.points)?)
@@ -104,102 +101,5 @@ pub fn run(cmd: LensCommand) -> Result<()> {
         bail!("no input: give at least one point or pixel");
     }
     println!("{}", serde_json::to_string(&out)?);
-    Ok(())
-}
-
-fn bench() -> Result<()> {
-    use rayon::prelude::*;
-    use std::time::Instant;
-    let mut splined = vec![900.0, 905.0, 959.5, 539.5];
-    splined.extend((0..384).map(|i| 0.002 * ((i % 7) as f64 - 3.0)));
-    let models: [(&str, Vec<f64>); 11] = [
-        ("LENSMODEL_PINHOLE", vec![1500.0, 1500.0, 959.5, 539.5]),
-        (
-            "LENSMODEL_OPENCV4",
-            vec![1500.0, 1500.0, 959.5, 539.5, -0.2, 0.05, 1e-3, -1e-3],
-        ),
-        (
-            "LENSMODEL_OPENCV5",
-            vec![1500.0, 1500.0, 959.5, 539.5, -0.2, 0.05, 1e-3, -1e-3, 0.01],
-        ),
-        (
-            "LENSMODEL_OPENCV8",
-            vec![
-                1500.0, 1500.0, 959.5, 539.5, -0.2, 0.05, 1e-3, -1e-3, 0.01, 0.02, -0.01, 0.005,
-            ],
-        ),
-        (
-            "LENSMODEL_OPENCV14",
-            vec![
-                1500.0, 1500.0, 959.5, 539.5, -0.2, 0.05, 1e-3, -1e-3, 0.01, 0.02, -0.01, 0.005,
-                1e-3, -1e-4, 1e-3, -1e-4, 0.01, -0.01,
-            ],
-        ),
-        (
-            "LENSMODEL_OPENCV_FISHEYE",
-            vec![600.0, 600.0, 959.5, 959.5, 0.02, -0.01, 0.002, -0.0005],
-        ),
-        ("LENSMODEL_STEREOGRAPHIC", vec![800.0, 800.0, 959.5, 539.5]),
-        ("LENSMODEL_LONLAT", vec![600.0, 600.0, 959.5, 539.5]),
-        ("LENSMODEL_LATLON", vec![600.0, 600.0, 959.5, 539.5]),
-        (
-            "LENSMODEL_CAHVOR",
-            vec![
-                1200.0, 1190.0, 959.5, 539.5, 0.01, -0.02, -0.05, 0.02, -0.003,
-            ],
-        ),
-        (
-            "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=120",
-            splined,
-        ),
-    ];
-    let n = 100_000;
-    println!("{n} points per model; points per second (millions)");
-    println!(
-        "{:<26} {:>10} {:>10} {:>10} {:>10}",
-        "model", "proj 1T", "proj all", "unproj 1T", "unproj all"
-    );
-    // The splined model's name carries its configuration; the table shows the family.
-    let short = |name: &str| name.split("_order").next().unwrap_or(name).to_string();
-    for (name, intrinsics) in models {
-        let lens = Lens::new(name.parse()?, intrinsics)?;
-        // Pixels over the image, unprojected once to get points the model can take.
-        let pixels: Vec<[f64; 2]> = (0..n)
-            .map(|i| [(i % 1920) as f64, ((i / 1920) % 1080) as f64])
-            .collect();
-        let rays: Vec<DVec3> = pixels
-            .iter()
-            .filter_map(|q| lens.unproject(*q).ok())
-            .collect();
-        let rate = |f: &dyn Fn() -> usize| {
-            let t = Instant::now();
-            let k = f();
-            k as f64 / t.elapsed().as_secs_f64() / 1e6
-        };
-        let p1 = rate(&|| rays.iter().filter(|r| lens.project(**r).is_ok()).count());
-        let pn = rate(&|| {
-            rays.par_iter()
-                .filter(|r| lens.project(**r).is_ok())
-                .count()
-        });
-        let u1 = rate(&|| {
-            pixels
-                .iter()
-                .filter(|q| lens.unproject(**q).is_ok())
-                .count()
-                .max(1)
-        });
-        let un = rate(&|| {
-            pixels
-                .par_iter()
-                .filter(|q| lens.unproject(**q).is_ok())
-                .count()
-                .max(1)
-        });
-        println!(
-            "{:<26} {p1:>10.2} {pn:>10.2} {u1:>10.2} {un:>10.2}",
-            short(name)
-        );
-    }
     Ok(())
 }

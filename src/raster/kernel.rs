@@ -58,7 +58,7 @@ pub(crate) fn bilinear_span_rgba8(
 }
 
 fn span_portable(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[u8; 4]]) {
-    crate::raster::bilinear_span_portable(data, stride, taps, out);
+    super::bilinear_span_portable(data, stride, taps, out);
 }
 
 #[cfg(target_arch = "x86_64")]

@@ -1,9 +1,12 @@
-//! 3D scenes for the cube-map pass: glTF and OBJ files, and a deterministic procedural city (a
-//! terrain, buildings on a street grid, four coloured towers at the compass points) in three
-//! sizes for tests and benchmarks. Also the CPU's way to see a scene: ray casting a cube map
-//! through a BVH, with the GPU's shading, for machines without any adapter.
+//! 3D scenes: glTF and OBJ files, and a deterministic procedural city (a terrain, buildings on a
+//! street grid, four coloured towers at the compass points) in three sizes for tests and
+//! benchmarks. The GPU draws them in its cube-map pass (`gpu::cube`, `shaders/scene.wgsl`);
+//! [`raycast`] is that pass's CPU twin, for machines without any adapter.
 
-use crate::cubemap::CubeMap;
+pub mod raycast;
+
+pub use raycast::RayCaster;
+
 use crate::error::{Error, Result};
 use crate::surface::Mesh;
 use glam::{DVec3, Mat4, Vec3};
@@ -368,27 +371,4 @@ pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
     out.extend(b"BIN\0");
     out.extend(b);
     out
-}
-
-pub struct RayCaster {
-    mesh: Mesh,
-    /// Per triangle: its first vertex's colour.
-    colors: Vec<[u8; 4]>,
-}
-
-impl RayCaster {
-    /// The scene seen from `eye` as a cube map (the CPU's cube-map pass): the colour of the
-    /// first triangle met, shaded as the GPU shades it, else the sky.
-    pub fn cube(&self, eye: DVec3, face: usize) -> CubeMap<[u8; 4]> {
-        let sun = sun().as_dvec3();
-        CubeMap::from_fn(face, 1, |d| match self.mesh.first_hit(eye, d) {
-            None => SKY,
-            Some((_, k, n)) => {
-                let c = self.colors[k as usize];
-                let light = 0.45 + 0.55 * n.dot(sun).abs();
-                let f = |v: u8| (f64::from(v) * light).round().clamp(0.0, 255.0) as u8;
-                [f(c[0]), f(c[1]), f(c[2]), 255]
-            }
-        })
-    }
 }

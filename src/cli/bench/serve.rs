@@ -1,4 +1,4 @@
-//! `omniwarp serve-bench`: the daemon under load, over real HTTP on loopback. Many clients edit
+//! `omniwarp bench serve`: the daemon under load, over real HTTP on loopback. Many clients edit
 //! tile screens with `If-Match` (retrying on 412, as a console would), while one client renders
 //! full-size previews of an edited channel. Reports edits per second, edit latency (first attempt
 //! to acknowledgement) and render latency, with and without the edits.
@@ -51,7 +51,7 @@ fn renders(addr: SocketAddr, channel: &str, n: usize) -> Result<Vec<f64>> {
 
 pub fn run(a: ServeBenchArgs) -> Result<()> {
     let dir = tempfile::tempdir()?;
-    let doc = serde_json::from_str(crate::serve_cmd::DEMO_RIG)?;
+    let doc = serde_json::from_str(omniwarp::rig::DEMO_RIG)?;
     let state = AppState::new(
         Store::open(Some(dir.path().to_path_buf()), Some(doc))?,
         None,

@@ -1,7 +1,58 @@
 //! A plain row-major image of RGBA pixels, top row first, and the two pixel types the renderer
 //! works on: 8-bit ([u8; 4], values 0–255) and float ([f32; 4], nominally 0–1).
 
-use crate::render::Tap;
+mod kernel;
+
+use crate::error::{Error, Result};
+
+/// One output sample of a render plan (`render::Plan`): the atlas texel at or before the sample position, and the fraction of a
+/// texel beyond it in x and y, in 1/65536 (far below any filter's visible precision).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(C)]
+pub struct Tap {
+    pub idx: u32,
+    pub fx: u16,
+    pub fy: u16,
+}
+
+impl Tap {
+    /// The tap of a sample the content does not cover.
+    pub const NONE: Tap = Tap {
+        idx: u32::MAX,
+        fx: 0,
+        fy: 0,
+    };
+}
+
+/// The most samples one render may plan: 2 GiB of taps.
+pub const MAX_SAMPLES: u64 = 1 << 28;
+
+/// Checks that a width × height output with k × k supersampling is one the renderer takes.
+pub fn check_size(width: u32, height: u32, supersample: u32) -> Result<()> {
+    if width == 0 || height == 0 || width > 32768 || height > 32768 {
+        return Err(Error::invalid(
+            "size",
+            format!("must be between 1×1 and 32768×32768 pixels, got {width}×{height}"),
+        ));
+    }
+    if !(1..=16).contains(&supersample) {
+        return Err(Error::invalid(
+            "supersample",
+            format!("must be between 1 and 16, got {supersample}"),
+        ));
+    }
+    let samples = u64::from(width) * u64::from(height) * u64::from(supersample).pow(2);
+    if samples > MAX_SAMPLES {
+        return Err(Error::invalid(
+            "size",
+            format!(
+                "{width}×{height} with {supersample}×{supersample} supersampling is {samples} \
+                 samples; at most {MAX_SAMPLES} fit in memory (8 bytes of plan each)"
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// A pixel the renderer can filter. Values stay in the type's own scale (0–255 for 8-bit), so
 /// filtering needs no conversion beyond to and from `f32`.
@@ -30,11 +81,11 @@ impl Pixel for [u8; 4] {
 
     #[inline(always)]
     fn bilinear(a: Self, b: Self, c: Self, d: Self, fx: u16, fy: u16) -> Self {
-        crate::render::kernel::bilinear_rgba8(a, b, c, d, fx, fy)
+        kernel::bilinear_rgba8(a, b, c, d, fx, fy)
     }
 
     fn bilinear_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
-        crate::render::kernel::bilinear_span_rgba8(data, stride, taps, out);
+        kernel::bilinear_span_rgba8(data, stride, taps, out);
     }
 }
 

@@ -1,0 +1,240 @@
+//! Arguments several commands share, their parsers, and how errors about them are worded: every
+//! error about an argument starts with the flag's name (`--size: …`), which is also how the
+//! binary tells a refused command line (exit 2) from failed work (exit 1).
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use glam::DVec3;
+use omniwarp::content::Format;
+use omniwarp::projection::{self, Orientation, Params, View};
+use omniwarp::render::Filter;
+use omniwarp::tiles::build::Source;
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Clone)]
+pub struct ProjectionArgs {
+    /// Projection name (see `omniwarp projections`): flat, cylindrical, fisheye, equirect, ...
+    #[arg(long)]
+    pub projection: Option<String>,
+    /// Horizontal field of view, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pub hfov: Option<f64>,
+    /// Vertical field of view, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pub vfov: Option<f64>,
+    /// Image-circle field of view of a fisheye, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pub fov: Option<f64>,
+    /// Forward tilt of a domemaster's zenith, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pub tilt: Option<f64>,
+    /// Off-axis frustum of `flat`: angle of the left edge from the axis, degrees (negative).
+    #[arg(long, allow_hyphen_values = true)]
+    pub left: Option<f64>,
+    /// Off-axis frustum of `flat`: angle of the right edge, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pub right: Option<f64>,
+    /// Off-axis frustum of `flat`: angle of the bottom edge, degrees (negative).
+    #[arg(long, allow_hyphen_values = true)]
+    pub bottom: Option<f64>,
+    /// Off-axis frustum of `flat`: angle of the top edge, degrees.
+    #[arg(long, allow_hyphen_values = true)]
+    pub top: Option<f64>,
+    /// Viewing direction x,y,z in the world (+y up, −z forward); any length.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,-1", allow_hyphen_values = true)]
+    pub look_to: DVec3,
+    /// Up direction x,y,z; must not be parallel to --look-to.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0", allow_hyphen_values = true)]
+    pub look_up: DVec3,
+    /// Off-axis vector O subtracted from the view direction (unitless, length below 1).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
+    pub offaxis: DVec3,
+    /// Zoom factor applied to the screen coordinates before projecting (unitless, > 0).
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
+    pub zoom: f64,
+}
+
+impl ProjectionArgs {
+    pub fn view(&self, width: u32, height: u32) -> Result<View> {
+        self.source(width, height)?.view().map_err(flag_error)
+    }
+
+    /// The projection and view as a tile screen's source.
+    pub fn source(&self, width: u32, height: u32) -> Result<Source> {
+        let name = self
+            .projection
+            .as_deref()
+            .context("missing --projection (or give --normal-map or --tiles)")?;
+        let params = Params {
+            hfov: self.hfov,
+            vfov: self.vfov,
+            fov: self.fov,
+            tilt: self.tilt,
+            left: self.left,
+            right: self.right,
+            bottom: self.bottom,
+            top: self.top,
+        };
+        let aspect = f64::from(height) / f64::from(width);
+        let source = Source {
+            projection: name.to_string(),
+            params,
+            aspect,
+            look_to: self.look_to.to_array(),
+            look_up: self.look_up.to_array(),
+            offaxis: self.offaxis.to_array(),
+            zoom: self.zoom,
+        };
+        // Checked here so that every error names its flag.
+        projection::build(name, &params, aspect).map_err(flag_error)?;
+        Orientation::look(self.look_to, self.look_up).map_err(flag_error)?;
+        source.view().map_err(flag_error)?;
+        Ok(source)
+    }
+}
+
+/// Library errors name parameters as `name`; on the command line they are `--name`.
+pub fn flag_error(e: omniwarp::Error) -> anyhow::Error {
+    match e {
+        omniwarp::Error::Invalid { name, reason } => anyhow::anyhow!("--{name}: {reason}"),
+        other => other.into(),
+    }
+}
+
+#[derive(Args)]
+pub struct ContentArgs {
+    /// Content image: PNG or JPEG (8-bit) or OpenEXR (float).
+    #[arg(long)]
+    pub content: Option<PathBuf>,
+    /// How the content image is laid out.
+    #[arg(long, value_enum)]
+    pub content_format: Option<ContentFormat>,
+    /// Horizontal field of view of a panorama, degrees (default 360).
+    #[arg(long)]
+    pub content_hfov: Option<f64>,
+    /// Vertical field of view of a panorama, degrees (default: 180 for a full equirect; square
+    /// pixels otherwise).
+    #[arg(long)]
+    pub content_vfov: Option<f64>,
+    /// Orientation of the content in the world: yaw,pitch,roll in degrees (yaw turns left,
+    /// pitch up, roll clockwise).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
+    pub content_rotate: DVec3,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ContentFormat {
+    /// Six faces side by side in omniwarp's order +X −X +Y −Y +Z −Z.
+    Cubemap,
+    /// ffmpeg v360's c3x2 layout.
+    CubemapC3x2,
+    /// ffmpeg v360's c6x1 layout.
+    CubemapC6x1,
+    /// Equirectangular panorama.
+    Equirect,
+    /// Cylindrical panorama (seed 001: height linear on the cylinder).
+    Cylindrical,
+    /// Six files: --content names them with `{face}`, replaced by px nx py ny pz nz.
+    CubemapFaces,
+}
+
+impl ContentFormat {
+    pub fn format(self) -> Format {
+        match self {
+            ContentFormat::Cubemap | ContentFormat::CubemapFaces => Format::Cubemap,
+            ContentFormat::CubemapC3x2 => Format::CubemapC3x2,
+            ContentFormat::CubemapC6x1 => Format::CubemapC6x1,
+            ContentFormat::Equirect => Format::Equirect,
+            ContentFormat::Cylindrical => Format::Cylindrical,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum FilterArg {
+    Nearest,
+    Bilinear,
+    Bicubic,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum CubeLayoutArg {
+    /// Six faces side by side in omniwarp's order.
+    Strip,
+    /// ffmpeg's c3x2.
+    C3x2,
+    /// ffmpeg's c6x1.
+    C6x1,
+    /// Six files: OUT must contain `{face}`, replaced by px nx py ny pz nz.
+    Faces,
+}
+
+pub fn parse_vec3(s: &str) -> Result<DVec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("expected three numbers x,y,z: {e}"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
+        [_, _, _] => Err("components must be finite".into()),
+        _ => Err(format!("expected three numbers x,y,z, got {}", v.len())),
+    }
+}
+
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| (1..=32768).contains(&n))
+            .ok_or_else(|| format!("`{v}` is not a size between 1 and 32768 pixels"))
+    };
+    match s.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((parse(w)?, parse(h)?)),
+        None => parse(s).map(|n| (n, n)),
+    }
+}
+
+pub fn filter(f: FilterArg) -> Filter {
+    match f {
+        FilterArg::Nearest => Filter::Nearest,
+        FilterArg::Bilinear => Filter::Bilinear,
+        FilterArg::Bicubic => Filter::Bicubic,
+    }
+}
+
+pub fn check_ext(path: &Path, allowed: &[&str]) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    if !allowed.contains(&ext.as_str()) {
+        bail!(
+            "--out: {} must end in .{}",
+            path.display(),
+            allowed.join(" or .")
+        );
+    }
+    Ok(())
+}
+
+/// Whether `e` is about the command line or its input (exit 2) rather than failed work (exit 1).
+pub fn is_usage(e: &anyhow::Error) -> bool {
+    e.to_string().starts_with("--")
+        || e.chain().any(|c| {
+            matches!(
+                c.downcast_ref::<omniwarp::Error>(),
+                Some(omniwarp::Error::Invalid { .. } | omniwarp::Error::Outside(_))
+            )
+        })
+}
+
+/// A library error as "field: reason", for input whose fields are not flags (a JSON file).
+pub fn named(e: omniwarp::Error) -> String {
+    match e {
+        omniwarp::Error::Invalid { name, reason } => format!("{name}: {reason}"),
+        other => other.to_string(),
+    }
+}

@@ -1,0 +1,57 @@
+//! `omniwarp bench …`: the benchmarks, one file each. They time on this machine and print
+//! figures (some also write them under `calibration/charts/`); they assert nothing and are run
+//! on demand, not in CI, because absolute timings here are noisy.
+
+pub mod calibrate;
+pub mod chart;
+pub mod gpu;
+pub mod lens;
+pub mod rig;
+pub mod serve;
+pub mod tiles;
+pub mod warp;
+
+use anyhow::Result;
+use clap::Subcommand;
+use std::path::PathBuf;
+
+// Parsed once per run; boxing the larger variant would buy nothing.
+#[allow(clippy::large_enum_variant)]
+#[derive(Subcommand)]
+pub enum BenchCommand {
+    /// The CPU warp's frame loop (plan built once) against the memory-bandwidth bound.
+    Warp(warp::BenchArgs),
+    /// Rig warps (3840×2160 on every surface type) and the dome example's blends.
+    Rig {
+        /// The rig whose blends are timed.
+        #[arg(long, default_value = rig::DOME_RIG)]
+        rig: PathBuf,
+    },
+    /// 3D scenes through the GPU renderer against cube-face size, with and without CMF, beside
+    /// the CPU reference (seed 000, Figure 8).
+    Gpu(gpu::GpuBenchArgs),
+    /// The daemon over loopback: tile edits per second and latency with many clients, and 1080p
+    /// preview latency while they edit.
+    Serve(serve::ServeBenchArgs),
+    /// Calibration against point count (50, 500, 5000) and lens model.
+    Calibrate,
+    /// Lens models: project and unproject throughput, one thread and all cores.
+    Lens,
+    /// Tile screens: normal-map generation for grid and output sizes.
+    Tiles,
+    /// Tile screens: chart of grid size against the largest reconstruction error (SVG).
+    Chart(chart::ChartArgs),
+}
+
+pub fn run(cmd: BenchCommand) -> Result<()> {
+    match cmd {
+        BenchCommand::Warp(a) => warp::run(a),
+        BenchCommand::Rig { rig } => rig::run(&rig),
+        BenchCommand::Gpu(a) => gpu::run(a),
+        BenchCommand::Serve(a) => serve::run(a),
+        BenchCommand::Calibrate => calibrate::run(),
+        BenchCommand::Lens => lens::run(),
+        BenchCommand::Tiles => tiles::run(),
+        BenchCommand::Chart(a) => chart::run(a),
+    }
+}

@@ -1,0 +1,172 @@
+//! `omniwarp export`: a channel's warp (or the whole rig) in the formats media servers read.
+
+use super::args::{ProjectionArgs, parse_size};
+use super::io::{channel, read_rig};
+use anyhow::{Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum ExportFormat {
+    /// ST-map EXR: R = u, G = v of the content image, origin bottom-left, A = validity.
+    Stmap,
+    /// PFM of wall XYZ per projector pixel (MPCDI's a3 meaning), NaN where none.
+    PfmA3,
+    /// ffmpeg `remap` xmap (--out) and ymap (--ymap) as 16-bit PGM.
+    Remap,
+    /// PFM of content (x, y) on a grid sized from --tolerance (MPCDI's 2d meaning).
+    Pfm2d,
+    /// Paul Bourke warp mesh (type 2) on a grid sized from --tolerance.
+    Mesh,
+    /// The whole rig as an MPCDI v2.0 package, 2d profile (every channel, one canvas).
+    Mpcdi,
+    /// The whole rig as an MPCDI v2.0 package, a3 profile.
+    MpcdiA3,
+}
+
+#[derive(Args)]
+pub struct ExportArgs {
+    /// Rig file (JSON).
+    #[arg(long)]
+    rig: PathBuf,
+    /// Channel id (every format but the MPCDI packages).
+    #[arg(long)]
+    channel: Option<String>,
+    #[arg(long, value_enum)]
+    format: ExportFormat,
+    /// Largest interpolation error of grid formats: content pixels (pfm2d, mesh, mpcdi) or
+    /// millimetres (mpcdi-a3).
+    #[arg(long)]
+    tolerance: Option<f64>,
+    /// The content canvas (for stmap and remap): its projection and view, as for `render`.
+    #[command(flatten)]
+    canvas: ProjectionArgs,
+    /// Content image size WxH in pixels (stmap and remap).
+    #[arg(long, value_parser = parse_size)]
+    content_size: Option<(u32, u32)>,
+    /// Output file.
+    #[arg(long)]
+    out: PathBuf,
+    /// The ymap file for --format remap.
+    #[arg(long)]
+    ymap: Option<PathBuf>,
+}
+
+pub fn run(a: ExportArgs) -> Result<()> {
+    use omniwarp::export::{self, channel::Sources, channel::Tolerance, mpcdi};
+    let rig = read_rig(&a.rig)?;
+    let size = || {
+        a.content_size
+            .context("--content-size: needed for this format")
+    };
+    let tolerance = |default: f64| {
+        Tolerance::checked(a.tolerance.unwrap_or(default), "tolerance")
+            .map_err(|e| anyhow::anyhow!("--tolerance: {}", e.reason()))
+    };
+    let write = |bytes: &[u8]| {
+        omniwarp::image_io::atomic_write(&a.out, |f| {
+            std::io::Write::write_all(f, bytes).map_err(|e| omniwarp::Error::file(&a.out, e))
+        })
+    };
+    if let ExportFormat::Mpcdi | ExportFormat::MpcdiA3 = a.format {
+        let (profile, tol) = match a.format {
+            ExportFormat::Mpcdi => (mpcdi::Profile::TwoD, tolerance(0.5)?),
+            _ => (mpcdi::Profile::A3, tolerance(1.0)?),
+        };
+        let (cw, chh) = match profile {
+            mpcdi::Profile::TwoD => size()?,
+            mpcdi::Profile::A3 => a.content_size.unwrap_or((1, 1)),
+        };
+        let canvas = match profile {
+            mpcdi::Profile::TwoD => Some(a.canvas.view(cw, chh)?),
+            mpcdi::Profile::A3 => None,
+        };
+        let mut regions = Vec::new();
+        for ch in &rig.channels {
+            let warp = rig.warp(ch);
+            let uv = canvas
+                .as_ref()
+                .map(|c| export::content_uv_unbounded(&warp.map, c))
+                .unwrap_or_else(|| vec![None; warp.points.len()]);
+            let weights = rig.blend_weights(ch, &warp.points);
+            let src = Sources {
+                id: &ch.id,
+                width: ch.width as usize,
+                height: ch.height as usize,
+                uv: &uv,
+                content_size: [cw, chh],
+                points: &warp.points,
+                eye: rig.eye,
+                weights: &weights,
+            };
+            let (region, err) = src.region(profile, tol)?;
+            eprintln!(
+                "{}: {}×{} grid, worst error {err:.4}",
+                ch.id, region.warp.0, region.warp.1
+            );
+            regions.push(region);
+        }
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        write(&mpcdi::package(mpcdi::Version::V2, profile, &regions, now)?)?;
+        return Ok(());
+    }
+    let id = a
+        .channel
+        .as_deref()
+        .context("--channel: needed for this format")?;
+    let ch = channel(&rig, id)?;
+    let (w, h) = (ch.width as usize, ch.height as usize);
+    let warp = rig.warp(ch);
+    let canvas_uv = |size: Option<(u32, u32)>| -> Result<Vec<Option<[f64; 2]>>> {
+        let (cw, chh) = size.context("--content-size: needed for this format")?;
+        let canvas = a.canvas.view(cw, chh)?;
+        Ok(export::content_uv(&warp.map, &canvas))
+    };
+    match a.format {
+        ExportFormat::Stmap => export::write_stmap(&a.out, &canvas_uv(a.content_size)?, w, h)?,
+        ExportFormat::PfmA3 => export::write_pfm(&a.out, w, h, &export::a3_samples(&warp.points))?,
+        ExportFormat::Remap => {
+            let ymap = a
+                .ymap
+                .as_ref()
+                .context("--ymap: remap needs a second file for the rows")?;
+            let (cw, chh) = size()?;
+            export::write_remap_pgm(&a.out, ymap, &canvas_uv(a.content_size)?, w, h, [cw, chh])?;
+        }
+        ExportFormat::Pfm2d | ExportFormat::Mesh => {
+            let (cw, chh) = size()?;
+            let uv = export::content_uv_unbounded(&warp.map, &a.canvas.view(cw, chh)?);
+            let weights = rig.blend_weights(ch, &warp.points);
+            let src = Sources {
+                id: &ch.id,
+                width: w,
+                height: h,
+                uv: &uv,
+                content_size: [cw, chh],
+                points: &warp.points,
+                eye: rig.eye,
+                weights: &weights,
+            };
+            let tol = tolerance(0.5)?;
+            if let ExportFormat::Mesh = a.format {
+                let (text, c) = src.bourke(tol)?;
+                eprintln!(
+                    "{}×{} mesh, worst error {:.4} px",
+                    c.grid.columns, c.grid.rows, c.max_error
+                );
+                write(text.as_bytes())?;
+            } else {
+                let (c, rows) = src.grid_2d(tol);
+                eprintln!(
+                    "{}×{} grid, worst error {:.4} px",
+                    c.grid.columns, c.grid.rows, c.max_error
+                );
+                export::write_pfm(&a.out, c.grid.columns, c.grid.rows, &rows)?;
+            }
+        }
+        ExportFormat::Mpcdi | ExportFormat::MpcdiA3 => unreachable!("handled above"),
+    }
+    Ok(())
+}

@@ -1,0 +1,168 @@
+//! Loading content and writing images for the commands that render: the pixel type follows the
+//! files (8-bit PNG/JPEG, float EXR), and every write is atomic.
+
+use super::args::{ContentArgs, ContentFormat, CubeLayoutArg, flag_error};
+use anyhow::{Context, Result, bail};
+use omniwarp::content::Content;
+use omniwarp::cubemap::{CubeMap, Face};
+use omniwarp::image_io::{self, Loaded, Precision};
+use omniwarp::projection::Orientation;
+use omniwarp::raster::{Pixel, Raster};
+use omniwarp::render::{self, Filter, Warp};
+use omniwarp::rig::{Channel, Rig};
+use omniwarp::tiles::TileScreen;
+use omniwarp::tiles::adapt::Report;
+use std::path::{Path, PathBuf};
+
+/// Content in the pixel type the output needs: float when either side is float.
+pub enum AnyContent {
+    U8(Content<[u8; 4]>),
+    F32(Content<[f32; 4]>),
+}
+
+pub fn load_content(a: &ContentArgs, want_float: bool) -> Result<AnyContent> {
+    let path = a
+        .content
+        .as_ref()
+        .context("--content: needed (render can take --scene instead)")?;
+    let format = a
+        .content_format
+        .context("--content-format: needed with --content")?;
+    let loaded = match format {
+        ContentFormat::CubemapFaces => image_io::read_cube_faces(&path.to_string_lossy()),
+        _ => image_io::read_image(path),
+    }
+    .context("--content")?;
+    let orient =
+        Orientation::yaw_pitch_roll(a.content_rotate.x, a.content_rotate.y, a.content_rotate.z)
+            .map_err(flag_error)?;
+    let fmt = format.format();
+    let (hfov, vfov) = (a.content_hfov, a.content_vfov);
+    let content = match loaded {
+        Loaded::U8(r) if !want_float => AnyContent::U8(
+            Content::from_image(&r, fmt, hfov, vfov)
+                .map_err(flag_error)?
+                .with_orientation(orient),
+        ),
+        Loaded::U8(r) => AnyContent::F32(
+            Content::from_image(&r.map(to_float), fmt, hfov, vfov)
+                .map_err(flag_error)?
+                .with_orientation(orient),
+        ),
+        Loaded::F32(r) => AnyContent::F32(
+            Content::from_image(&r, fmt, hfov, vfov)
+                .map_err(flag_error)?
+                .with_orientation(orient),
+        ),
+    };
+    Ok(content)
+}
+
+pub fn to_float(p: [u8; 4]) -> [f32; 4] {
+    p.map(|c| f32::from(c) / 255.0)
+}
+
+pub fn to_u8(p: [f32; 4]) -> [u8; 4] {
+    <[u8; 4]>::from_f32(p.map(|c| c * 255.0))
+}
+
+pub fn write_output(path: &Path, img: AnyRaster, attrs: &[(String, String)]) -> Result<()> {
+    if is_exr(path) {
+        let f = match img {
+            AnyRaster::U8(r) => r.map(to_float),
+            AnyRaster::F32(r) => r,
+        };
+        image_io::write_exr_rgba(path, &f, attrs, Precision::Float)?;
+    } else {
+        let b = match img {
+            AnyRaster::U8(r) => r,
+            AnyRaster::F32(r) => r.map(to_u8),
+        };
+        image_io::write_png(path, &b)?;
+    }
+    Ok(())
+}
+
+pub fn is_exr(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
+pub enum AnyRaster {
+    U8(Raster<[u8; 4]>),
+    F32(Raster<[f32; 4]>),
+}
+
+pub fn cube_faces<T: Pixel>(c: &Content<T>, n: u32, ss: u32, f: Filter) -> Result<CubeMap<T>> {
+    let faces: Vec<Raster<T>> = Face::ALL
+        .iter()
+        .map(|&face| render::render(Warp::CubeFace(face), c, n, n, ss, f))
+        .collect::<Result<_, _>>()
+        .map_err(flag_error)?;
+    Ok(CubeMap::from_faces(faces.try_into().expect("six faces"))?)
+}
+
+pub fn write_cube<T: Pixel>(
+    cube: &CubeMap<T>,
+    layout: CubeLayoutArg,
+    out: &Path,
+    wrap: fn(Raster<T>) -> AnyRaster,
+) -> Result<()> {
+    use omniwarp::cubemap::Layout;
+    let layout = match layout {
+        CubeLayoutArg::Strip => Layout::Strip,
+        CubeLayoutArg::C3x2 => Layout::FfmpegC3x2,
+        CubeLayoutArg::C6x1 => Layout::FfmpegC6x1,
+        CubeLayoutArg::Faces => {
+            let pattern = out.to_string_lossy();
+            if !pattern.contains("{face}") {
+                bail!("--out: with --layout faces the name must contain {{face}}");
+            }
+            for face in Face::ALL {
+                let path = PathBuf::from(pattern.replace("{face}", face.label()));
+                write_output(&path, wrap(cube.face(face).clone()), &[])?;
+            }
+            return Ok(());
+        }
+    };
+    write_output(out, wrap(layout.join(cube)), &[])
+}
+
+pub fn read_rig(path: &Path) -> Result<Rig> {
+    Rig::read(path).with_context(|| "--rig".to_string())
+}
+
+pub fn channel<'a>(rig: &'a Rig, id: &str) -> Result<&'a Channel> {
+    rig.channel(id)
+        .map_err(|e| anyhow::anyhow!("--channel: {}", e.reason()))
+}
+
+pub fn read_tiles(path: &Path) -> Result<TileScreen> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("--tiles {}", path.display()))?;
+    TileScreen::from_json(&text).with_context(|| format!("--tiles {}", path.display()))
+}
+
+/// Whether `e` comes from writing into a pipe whose reader has gone (`omniwarp … | head`).
+pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            || matches!(
+                c.downcast_ref::<omniwarp::Error>(),
+                Some(omniwarp::Error::File {
+                    kind: Some(std::io::ErrorKind::BrokenPipe),
+                    ..
+                })
+            )
+    })
+}
+
+/// One line about a tile screen's accuracy against the exact warp.
+pub fn print_report(prefix: &str, r: &Report) {
+    println!(
+        "{prefix}grid {}×{} ({} features): max error {:.4}° ({:.3} px), RMS {:.4}°, {} pixels \
+         uncovered",
+        r.columns, r.rows, r.features, r.max_deg, r.max_px, r.rms_deg, r.uncovered
+    );
+}

@@ -1,0 +1,265 @@
+//! `omniwarp render`: content through a projection, a normal map, a tile screen or a rig
+//! channel's warp (with its blend), or a 3D scene through a projection on the GPU (wgpu;
+//! lavapipe where there is no GPU) or the CPU.
+
+use super::args::{
+    ContentArgs, FilterArg, ProjectionArgs, check_ext, filter, flag_error, parse_size, parse_vec3,
+};
+use super::io::{
+    AnyContent, AnyRaster, channel, is_exr, load_content, read_rig, read_tiles, write_output,
+};
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use glam::DVec3;
+use omniwarp::gpu::Renderer;
+use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
+use omniwarp::normalmap::NormalMap;
+use omniwarp::projection::View;
+use omniwarp::raster::Pixel;
+use omniwarp::render::blur::Blur;
+use omniwarp::render::{self, Warp};
+use omniwarp::scene::Scene;
+use omniwarp::tiles::raster::saturation;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    content: ContentArgs,
+    #[command(flatten)]
+    projection: ProjectionArgs,
+    /// Take the sampling vectors from this normal map (EXR) instead of a projection.
+    #[arg(long, conflicts_with = "projection")]
+    normal_map: Option<PathBuf>,
+    /// Take the sampling vectors from this tile screen (JSON) instead; its f values scale the
+    /// saturation (seed 000, Figure 5).
+    #[arg(long, conflicts_with_all = ["projection", "normal_map"])]
+    tiles: Option<PathBuf>,
+    /// Render a rig channel's projector image instead (with --channel): its own warp, its
+    /// blend mask applied in signal space.
+    #[arg(long, requires = "channel", conflicts_with_all = ["projection", "normal_map", "tiles"])]
+    rig: Option<PathBuf>,
+    /// The rig channel to render.
+    #[arg(long, requires = "rig")]
+    channel: Option<String>,
+    /// Projector gamma for the blend mask (with --rig).
+    #[arg(long, default_value_t = 2.2)]
+    gamma: f64,
+    /// Texture filter.
+    #[arg(long, value_enum, default_value = "bilinear")]
+    filter: FilterArg,
+    /// K×K samples per output pixel, averaged (1 to 16).
+    #[arg(long, default_value_t = 1)]
+    supersample: u32,
+    /// Output size WxH in pixels (default: the normal map's).
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Output image: .png (8-bit RGBA) or .exr (32-bit float RGBA). Alpha is 0 where nothing
+    /// is shown.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    scene: SceneArgs,
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    check_ext(&a.out, &["png", "exr"])?;
+    if let Some(spec) = &a.scene.scene {
+        let (w, h) = a.size.context("--size: needed with --scene")?;
+        let view = a.projection.view(w, h)?;
+        return render_scene(spec, &a.scene, &view, (w, h), &a.out);
+    }
+    if let Some(RendererArg::Gpu) = a.scene.renderer {
+        bail!(
+            "--renderer: gpu renders 3D scenes (--scene) only; content renders run on the CPU \
+             reference path (leave --renderer out, or say cpu)"
+        );
+    }
+    let mut mask = None;
+    let map = match (&a.rig, &a.channel) {
+        (Some(rig), Some(id)) => {
+            let (m, k) = render_inputs(rig, id, a.gamma)?;
+            mask = Some(k);
+            Some(m)
+        }
+        _ => a
+            .normal_map
+            .as_deref()
+            .map(NormalMap::read)
+            .transpose()
+            .context("--normal-map")?,
+    };
+    let (w, h) = match (a.size, &map) {
+        (Some(s), _) => s,
+        (None, Some(m)) => (m.width() as u32, m.height() as u32),
+        (None, None) => bail!("--size: needed when rendering through a projection or tiles"),
+    };
+    let features = match &a.tiles {
+        Some(path) => Some(read_tiles(path)?.feature_map(w as usize, h as usize)),
+        None => None,
+    };
+    let tile_map = features.as_ref().map(|f| f.normal_map());
+    let view;
+    let warp = match (&map, &tile_map) {
+        (Some(m), _) | (None, Some(m)) => Warp::Map(m),
+        (None, None) => {
+            view = a.projection.view(w, h)?;
+            Warp::View(&view)
+        }
+    };
+    let content = load_content(&a.content, is_exr(&a.out))?;
+    let (ss, f) = (a.supersample, filter(a.filter));
+    let effect = features.as_ref().map(|f| f.f());
+    let scale = |img: &mut [f32; 4], m: f32| {
+        for c in &mut img[..3] {
+            *c *= m;
+        }
+    };
+    let img = match &content {
+        AnyContent::U8(c) => {
+            let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
+            if let Some(e) = &effect {
+                saturation(&mut r, e);
+            }
+            if let Some(m) = &mask {
+                for (p, &k) in r.data.iter_mut().zip(m) {
+                    let mut v = p.to_f32();
+                    scale(&mut v, k);
+                    *p = <[u8; 4]>::from_f32(v);
+                }
+            }
+            AnyRaster::U8(r)
+        }
+        AnyContent::F32(c) => {
+            let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
+            if let Some(e) = &effect {
+                saturation(&mut r, e);
+            }
+            if let Some(m) = &mask {
+                for (p, &k) in r.data.iter_mut().zip(m) {
+                    scale(p, k);
+                }
+            }
+            AnyRaster::F32(r)
+        }
+    };
+    write_output(&a.out, img, &[])
+}
+
+/// A channel's warp map and its blend mask in signal space, for `render --rig`.
+pub fn render_inputs(path: &Path, id: &str, gamma: f64) -> Result<(NormalMap, Vec<f32>)> {
+    let rig = read_rig(path)?;
+    let ch = channel(&rig, id)?;
+    let w = rig.warp(ch);
+    let mask = rig
+        .blend_weights(ch, &w.points)
+        .iter()
+        .map(|&x| (f64::from(x).powf(1.0 / gamma)) as f32)
+        .collect();
+    Ok((w.map, mask))
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum RendererArg {
+    Gpu,
+    Cpu,
+    Auto,
+}
+
+impl RendererArg {
+    pub fn renderer(self) -> Renderer {
+        match self {
+            RendererArg::Gpu => Renderer::Gpu,
+            RendererArg::Cpu => Renderer::Cpu,
+            RendererArg::Auto => Renderer::Auto,
+        }
+    }
+}
+
+#[derive(Args)]
+pub struct SceneArgs {
+    /// Render a 3D scene instead of content: a .gltf/.glb or .obj file, or the procedural
+    /// city:small, city:medium or city:large (~10k, 100k, 1M triangles).
+    #[arg(long, conflicts_with_all = ["content", "normal_map", "tiles", "rig"])]
+    pub scene: Option<String>,
+    /// Eye position x,y,z in the scene, metres.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,1.7,0", allow_hyphen_values = true)]
+    pub eye: DVec3,
+    /// Cube face size in pixels (default: chosen from the output's pixel pitch).
+    #[arg(long)]
+    pub face: Option<u32>,
+    /// Draw all six faces even where the warp samples fewer (turns off seed 000's CMF).
+    #[arg(long)]
+    pub all_faces: bool,
+    /// gpu, cpu, or auto (the GPU when an adapter exists; the default). Scenes only: content
+    /// renders run on the CPU reference path.
+    #[arg(long, value_enum)]
+    pub renderer: Option<RendererArg>,
+    /// Adapter to use: part of its name or backend (e.g. vulkan, gl, llvmpipe).
+    #[arg(long)]
+    pub adapter: Option<String>,
+    /// Radial blur towards the image centre: the fraction of the way it reaches (0 to 1).
+    #[arg(long)]
+    pub blur: Option<f32>,
+}
+
+fn render_scene(
+    spec: &str,
+    a: &SceneArgs,
+    view: &View,
+    size: (u32, u32),
+    out: &Path,
+) -> Result<()> {
+    let blur = match a.blur {
+        Some(s) if (0.0..=1.0).contains(&s) => Some(Blur {
+            strength: s,
+            samples: 16,
+        }),
+        Some(s) => anyhow::bail!("--blur: must be between 0 and 1, got {s}"),
+        None => None,
+    };
+    let scene = Scene::load(spec).map_err(|e| anyhow::anyhow!("--scene: {}", e.reason()))?;
+    let mut r = SceneRenderer::new(
+        scene,
+        a.renderer.unwrap_or(RendererArg::Auto).renderer(),
+        a.adapter.as_deref(),
+    )
+    .map_err(flag_error)?;
+    let opts = FrameOptions {
+        size,
+        face: a.face,
+        cmf: !a.all_faces,
+        blur,
+        eye: a.eye,
+    };
+    let (img, report) = r.frame(view, &opts).map_err(flag_error)?;
+    let drawn: Vec<&str> = omniwarp::cubemap::Face::ALL
+        .iter()
+        .filter(|f| report.faces[f.index()])
+        .map(|f| f.label())
+        .collect();
+    eprintln!(
+        "{}: faces {} at {}²",
+        r.describe(),
+        drawn.join(" "),
+        report.face
+    );
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        let f = omniwarp::raster::Raster {
+            width: img.width,
+            height: img.height,
+            data: img
+                .data
+                .iter()
+                .map(|p| p.map(|c| f32::from(c) / 255.0))
+                .collect(),
+        };
+        omniwarp::image_io::write_exr_rgba(out, &f, &[], omniwarp::image_io::Precision::Float)?;
+    } else {
+        omniwarp::image_io::write_png(out, &img).context("--out")?;
+    }
+    Ok(())
+}

@@ -1,0 +1,31 @@
+//! The CPU's way to see a scene: a cube map ray-cast through the scene's BVH, shaded as the GPU
+//! shades it. The CPU twin of the cube-map pass (`src/gpu/cube.rs`, `shaders/scene.wgsl`): same
+//! face table, same sun, same sky, so the two agree to rounding where both see one triangle.
+
+use super::{SKY, sun};
+use crate::cubemap::CubeMap;
+use crate::surface::Mesh;
+use glam::DVec3;
+
+pub struct RayCaster {
+    pub(super) mesh: Mesh,
+    /// Per triangle: its first vertex's colour.
+    pub(super) colors: Vec<[u8; 4]>,
+}
+
+impl RayCaster {
+    /// The scene seen from `eye` as a cube map (the CPU's cube-map pass): the colour of the
+    /// first triangle met, shaded as the GPU shades it, else the sky.
+    pub fn cube(&self, eye: DVec3, face: usize) -> CubeMap<[u8; 4]> {
+        let sun = sun().as_dvec3();
+        CubeMap::from_fn(face, 1, |d| match self.mesh.first_hit(eye, d) {
+            None => SKY,
+            Some((_, k, n)) => {
+                let c = self.colors[k as usize];
+                let light = 0.45 + 0.55 * n.dot(sun).abs();
+                let f = |v: u8| (f64::from(v) * light).round().clamp(0.0, 255.0) as u8;
+                [f(c[0]), f(c[1]), f(c[2]), 255]
+            }
+        })
+    }
+}

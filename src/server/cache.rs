@@ -1,0 +1,49 @@
+//! What the daemon keeps computed between requests: per channel the geometric warp and blend
+//! weights (keyed by rig revision) and the warp as shown (keyed by rig and tiles revision), and
+//! the GPU handle previews use. Plain data: the functions that fill it live in `jobs`.
+
+use crate::normalmap::NormalMap;
+use crate::rig::ChannelWarp;
+use std::sync::Arc;
+
+/// What depends on the rig alone: the geometric warp and the blend weights (tile edits change
+/// which content a pixel shows, not where its light lands).
+pub struct Geometry {
+    pub warp: ChannelWarp,
+    pub weights: Vec<f32>,
+}
+
+/// A channel's warp as it is shown: the geometry, the effective sampling map (the tile
+/// screen's where one is set) and the tiles' f per pixel.
+pub struct Computed {
+    pub geometry: Arc<Geometry>,
+    pub map: NormalMap,
+    pub f: Option<Vec<f32>>,
+}
+
+/// The daemon's GPU, if the machine has an adapter: created on first use.
+pub struct GpuWarp {
+    pub gpu: crate::gpu::Gpu,
+    pub pass: crate::gpu::warp::WarpPass,
+}
+
+impl GpuWarp {
+    /// The machine's GPU with the warp pass built, or `None` (logged) where there is none.
+    pub fn open() -> Option<Arc<GpuWarp>> {
+        match crate::gpu::Gpu::new(None) {
+            Ok(Some(gpu)) => {
+                tracing::info!(adapter = %gpu.describe(), "GPU renderer ready");
+                let pass = crate::gpu::warp::WarpPass::new(&gpu);
+                Some(Arc::new(GpuWarp { gpu, pass }))
+            }
+            Ok(None) => {
+                tracing::warn!("no GPU adapter: previews render on the CPU");
+                None
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "GPU unusable: previews render on the CPU");
+                None
+            }
+        }
+    }
+}

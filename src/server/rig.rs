@@ -1,0 +1,110 @@
+//! The rig routes: health, version, the rig document and its channels, and the change feed.
+
+use super::ApiError;
+use super::state::{AppState, WORKERS, if_match, tagged};
+use crate::rig::Rig;
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::State;
+use axum::http::HeaderMap;
+use axum::response::Response;
+use axum::response::sse::{Event, KeepAlive, Sse};
+use futures_util::Stream;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use tokio_stream::StreamExt;
+use tokio_stream::wrappers::BroadcastStream;
+
+pub async fn health(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
+    Json(serde_json::json!({
+        "status": "ok",
+        "workers": {
+            "limit": WORKERS,
+            "free": s.workers.available_permits(),
+            "done": s.jobs_done.load(Ordering::Relaxed),
+            "cancelled": s.jobs_cancelled.load(Ordering::Relaxed),
+        }
+    }))
+}
+
+pub async fn version() -> Json<serde_json::Value> {
+    Json(serde_json::json!({"name": "omniwarp", "version": env!("CARGO_PKG_VERSION"), "api": "v1"}))
+}
+
+pub async fn get_rig(State(s): State<Arc<AppState>>) -> Response {
+    let (rig, revision) = s.store.snapshot();
+    tagged(
+        serde_json::json!({"revision": revision, "rig": rig.doc}),
+        revision,
+    )
+}
+
+/// Makes `rig` the new revision if `wanted` is still current; durable before it returns.
+pub async fn commit_rig(s: &Arc<AppState>, wanted: u64, rig: Rig) -> Result<u64, ApiError> {
+    let _writer = s.store.rig_writer.lock().await;
+    let (_, current) = s.store.snapshot();
+    if wanted != current {
+        return Err(ApiError::Stale { current });
+    }
+    let revision = current + 1;
+    let state = s.clone();
+    let doc = rig.doc.clone();
+    tokio::task::spawn_blocking(move || state.store.save_rig(&doc, revision))
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))??;
+    s.store.install(rig, revision);
+    s.warps
+        .lock()
+        .expect("cache lock")
+        .retain(|k, _| k.1 == revision);
+    s.computed
+        .lock()
+        .expect("cache lock")
+        .retain(|k, _| k.1 == revision);
+    s.announce(serde_json::json!({"kind": "rig", "revision": revision}));
+    tracing::info!(revision, "rig updated");
+    Ok(revision)
+}
+
+pub async fn put_rig(
+    State(s): State<Arc<AppState>>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    let text = std::str::from_utf8(&body).map_err(|_| ApiError::Invalid {
+        field: "/".into(),
+        reason: "the body is not UTF-8".into(),
+    })?;
+    let base = s.store.dir.clone().unwrap_or_else(|| PathBuf::from("."));
+    let rig = Rig::from_json(text, &base)?;
+    let revision = commit_rig(&s, wanted, rig).await?;
+    Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}
+
+pub async fn channels(State(s): State<Arc<AppState>>) -> Response {
+    let (rig, revision) = s.store.snapshot();
+    let list: Vec<_> = rig
+        .channels
+        .iter()
+        .map(|c| serde_json::json!({"id": c.id, "resolution": [c.width, c.height], "lens": c.lens.model().to_string()}))
+        .collect();
+    tagged(
+        serde_json::json!({"revision": revision, "channels": list}),
+        revision,
+    )
+}
+
+/// The change feed: the rig's revision first, then every change as it is made.
+pub async fn events(
+    State(s): State<Arc<AppState>>,
+) -> Sse<impl Stream<Item = Result<Event, std::convert::Infallible>>> {
+    let (_, now) = s.store.snapshot();
+    let first = serde_json::json!({"kind": "rig", "revision": now}).to_string();
+    let first = tokio_stream::once(Ok(Event::default().event("change").data(first)));
+    let rest = BroadcastStream::new(s.events.subscribe())
+        .filter_map(|r| r.ok())
+        .map(|c| Ok(Event::default().event("change").data(c)));
+    Sse::new(first.chain(rest)).keep_alive(KeepAlive::default())
+}
