@@ -1,5 +1,6 @@
 // Radial blur (seed 000, Figure 7): each pixel averages samples along the line towards the
-// image centre, the blur growing with the distance from it, as speed looks from a vehicle.
+// image centre, the blur growing with the distance from it, as speed looks from a vehicle. CPU
+// twin, tap for tap: src/render/blur.rs.
 
 struct Blur {
     // strength (fraction of the distance to the centre covered), samples, width, height

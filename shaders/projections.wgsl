@@ -1,5 +1,6 @@
-// δP of every projection and the view transform: the WGSL twins of src/projection/*.rs and
-// View::direction, formula for formula (f32 here, f64 there). `Projection` mirrors
+// δP of every projection and the view transform: the WGSL twins of the projections registered
+// in src/projection/mod.rs (one file each beside it) and of View::direction, formula for formula
+// (f32 here, f64 there). `Projection` mirrors
 // gpu::warp::ProjectionUniform; `kind` and `radial` as in projection::ShaderForm.
 
 struct Projection {

@@ -1,6 +1,7 @@
 // The cube-map pass: a scene drawn into one cube face per render pass (the face's matrix maps
 // the face's (sc, −tc, depth, |ma|) to clip space, so the face texture reads like the CPU's
-// cube table), flat shaded from the triangle's own plane.
+// cube table), flat shaded from the triangle's own plane. The CPU twin, for machines without an
+// adapter, ray-casts the same faces with the same shading: src/scene/raycast.rs.
 
 struct Face {
     clip: mat4x4<f32>,

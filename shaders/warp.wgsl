@@ -1,7 +1,8 @@
 // The warp pass: one full-screen triangle; each output pixel samples the cube map along its
 // sampling vector V, taken from the analytic projection (mode 0) or from the float normal map
 // (mode 1, textureLoad so it binds where Rgba32Float cannot be filtered), then the tile
-// screen's f lowers its saturation (seed 000, Figure 5). Prepended: projections.wgsl.
+// screen's f lowers its saturation (seed 000, Figure 5). Prepended: projections.wgsl. The CPU
+// twin is the reference renderer, src/render/mod.rs.
 
 struct Settings {
     // mode, has f map, unused, unused

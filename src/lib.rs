@@ -1,6 +1,6 @@
 //! omniwarp: warps for non-planar projection walls with a single centre of projection.
 //!
-//! The data flow and conventions are those of `DESIGN.md`: projection functions δP in
+//! The data flow and conventions are those of `docs/conventions.md`: projection functions δP in
 //! [`projection`], cube maps in [`cubemap`], content sources in [`content`], the CPU reference
 //! renderer in [`render`] and the float normal maps (warp maps) in [`normalmap`].
 

@@ -1,6 +1,6 @@
 //! Normal maps (warp maps): per output pixel the unit sampling vector V in world coordinates and
 //! its validity, stored as OpenEXR with R, G, B = V and A = 1 where valid, 0 where nothing is
-//! shown (DESIGN.md). Text attributes in the header say what the map is for:
+//! shown (docs/conventions.md). Text attributes in the header say what the map is for:
 //! `omniwarp.projection`, `omniwarp.channel`, `omniwarp.rig_revision` and the like.
 //!
 //! 32-bit float files round-trip bit-exactly. Half-float files are a third of the size; the

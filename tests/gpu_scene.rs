@@ -4,12 +4,12 @@
 
 use glam::DVec3;
 use omniwarp::cubemap::Face;
-use omniwarp::cubemap::coverage::faces_sampled;
 use omniwarp::gpu::Renderer;
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::{self, Params, View};
 use omniwarp::raster::{Raster, psnr};
+use omniwarp::render::coverage::faces_sampled;
 use omniwarp::scene::{LANDMARKS, Scene};
 
 fn view(name: &str, params: Params, w: u32, h: u32) -> View {

@@ -136,8 +136,8 @@ fn unprojection_equals_opencv_where_opencv_is_right() {
     }
 }
 
-/// LENS-MODELS.md §3.3: OpenCV 4.x clamps the fisheye's distorted radius to π/2, so beyond it
-/// its inverse returns a wrong (mirrored) point. Ours recovers the true ray there.
+/// docs/lens-models.md ("OpenCV fisheye"): OpenCV 4.x clamps the fisheye's distorted radius to π/2,
+/// so beyond it its inverse returns a wrong (mirrored) point. Ours recovers the true ray there.
 #[test]
 fn fisheye_beyond_opencvs_clamp_still_unprojects() {
     let mut checked = 0;
@@ -319,7 +319,7 @@ fn points_without_a_pixel_are_refused_not_mirrored() {
 }
 
 /// CAHVOR and the splined model have no library to compare with here (mrcal 2.5 needs Python
-/// 3.12, which this machine's registries do not offer): their formulas follow LENS-MODELS.md
+/// 3.12, which this machine's registries do not offer): their formulas follow docs/lens-models.md
 /// §4.7–4.8 and are checked for self-consistency: round trips, Jacobians against finite
 /// differences (the knots' included), behind-camera reach.
 #[test]
@@ -523,9 +523,9 @@ mod files {
     }
 }
 
-/// LENS-MODELS.md §2.4: with strong pincushion (k1 = +1) OpenCV's fixed-point inverse oscillates
-/// or diverges (at ρ = 1.2 its default returned 0.379, 50 iterations 2.53; at 1.5: 0.214 and 4.66)
-/// although the map is invertible. Ours converges to the true ray.
+/// docs/lens-models.md ("OpenCV pinhole", the inverse): with strong pincushion (k1 = +1) OpenCV's
+/// fixed-point inverse oscillates or diverges (at ρ = 1.2 its default returned 0.379, 50 iterations
+/// 2.53; at 1.5: 0.214 and 4.66) although the map is invertible. Ours converges to the true ray.
 #[test]
 fn strong_pincushion_where_opencvs_fixed_point_fails() {
     let l = Lens::new(

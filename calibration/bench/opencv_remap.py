@@ -1,7 +1,7 @@
 """Times OpenCV's cv2.remap with float maps on the bench's input, for scripts/bench-peers.
 
 The maps send each pixel of a cylindrical 270°×90° view to the cube map in ffmpeg's c6x1
-layout (DESIGN.md's directions and face table; ffmpeg's slots mirror our faces, see
+layout (docs/conventions.md's directions and face table; ffmpeg's slots mirror our faces, see
 omniwarp::cubemap::Layout). OpenCV filters one image, so lookups across face edges clamp
 instead of reading the neighbour face; that costs it a little PSNR, not time.
 
@@ -22,7 +22,7 @@ def maps(n, w, h):
     y = np.broadcast_to(t * np.tan(np.radians(45.0)), (h, w))
     z = np.broadcast_to(-np.cos(lon), (h, w))
     ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
-    # Face table of DESIGN.md: (slot in ffmpeg's r l u d f b, sc, tc, ma, mirror left-right).
+    # Face table of docs/conventions.md: (slot in ffmpeg's r l u d f b, sc, tc, ma, mirror left-right).
     is_x = (ax >= ay) & (ax >= az)
     is_y = ~is_x & (ay >= az)
     is_z = ~is_x & ~is_y

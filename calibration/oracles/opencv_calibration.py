@@ -1,4 +1,4 @@
-"""The calibration oracle: LENS-MODELS.md §7.3's synthetic projector inside a cylinder, solved by
+"""The calibration oracle: docs/lens-models.md's oracle synthetic projector inside a cylinder, solved by
 OpenCV (solvePnP with the true lens, calibrateCamera with an intrinsic guess), so that
 omniwarp's solver can be compared with it on the same data. Deterministic (fixed seed).
 

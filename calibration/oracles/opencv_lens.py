@@ -5,7 +5,7 @@ LENSMODEL_OPENCV_FISHEYE (cv2.fisheye.projectPoints / cv2.fisheye.undistortPoint
 realistic projector parameter sets each, a few hundred camera-frame points spread over the
 image and out to the edge of the model's valid region: the pixels, OpenCV's Jacobian with
 respect to the intrinsics, and OpenCV's accurate inverse. Points where OpenCV's own inverse is
-known to be wrong (LENS-MODELS.md §3.3: fisheye radii beyond π/2, which 4.x clamps) are listed,
+known to be wrong (docs/lens-models.md ("OpenCV fisheye"): fisheye radii beyond π/2, which 4.x clamps) are listed,
 not used as truth. Deterministic (fixed seed); run by calibration/oracles/make_fixtures.sh.
 
 usage: opencv_lens.py OUT_DIR

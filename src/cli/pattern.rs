@@ -30,7 +30,7 @@ pub struct PatternArgs {
     #[arg(long, default_value_t = 4)]
     supersample: u32,
     /// Lay the equirect image out as ffmpeg's v360 reads it: the centres of the edge columns
-    /// and rows at ±180° and ±90° (DESIGN.md puts the image's outer edges there).
+    /// and rows at ±180° and ±90° (docs/conventions.md puts the image's outer edges there).
     #[arg(long, conflicts_with = "layout")]
     ffmpeg_equirect: bool,
     /// Output file (.png or .exr).

@@ -5,8 +5,8 @@
 //!
 //! * Cube map: the cube-map table of [`crate::cubemap`].
 //! * Equirectangular: u = 0.5 + lon/hfov, v = 0.5 − lat/vfov, lon = atan2(x, −z),
-//!   lat = asin(y); with hfov = 360, vfov = 180 this is DESIGN.md's u = 0.5 + atan2(x, −z)/2π,
-//!   v = 0.5 − asin(y)/π.
+//!   lat = asin(y); with hfov = 360, vfov = 180 this is the u = 0.5 + atan2(x, −z)/2π,
+//!   v = 0.5 − asin(y)/π of docs/conventions.md.
 //! * Cylindrical panorama (seed 001): u = 0.5 + lon/hfov, v = 0.5 − y/(H·√(x² + z²)) with
 //!   H = 2·tan(vfov/2); seed 001 writes v = z/(H·√(x²+y²)) + 0.5 for a z-up frame with v up.
 //!

@@ -50,8 +50,8 @@ impl Pattern {
 
     /// A full 360°×180° equirectangular image of the pattern, each pixel the mean of `ss` × `ss`
     /// samples. `centres_at_edges` follows ffmpeg v360's equirect input convention instead of
-    /// DESIGN.md's: the centres of the first and last columns (rows) lie at ±180° (±90°), so a
-    /// pixel spans 360°/(W − 1) rather than 360°/W.
+    /// the one of docs/conventions.md: the centres of the first and last columns (rows) lie at
+    /// ±180° (±90°), so a pixel spans 360°/(W − 1) rather than 360°/W.
     pub fn equirect(
         self,
         width: usize,

@@ -15,7 +15,6 @@
 //! [0, 1]; face images are stored top row first. Where two axes tie for the largest magnitude
 //! the earlier of x, y, z wins (any choice samples the same texel on the shared edge).
 
-pub mod coverage;
 mod layout;
 
 pub use layout::Layout;

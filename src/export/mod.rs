@@ -1,4 +1,4 @@
-//! Exports for media servers (FORMATS.md): ST-map EXR (R = u, G = v in [0, 1] of the content
+//! Exports for media servers (docs/formats.md): ST-map EXR (R = u, G = v in [0, 1] of the content
 //! image, origin bottom-left, A = 0 where unmapped), PFM (3-channel, little-endian, rows bottom
 //! to top on disk; the a3 meaning — wall XYZ per pixel, NaN where there is none) and ffmpeg's
 //! `remap` xmap/ymap (16-bit PGM of absolute content pixel columns and rows; 65535 where

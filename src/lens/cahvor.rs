@@ -1,4 +1,4 @@
-//! JPL's CAHVOR as mrcal parametrises it (LENS-MODELS.md §4.7), intrinsics
+//! JPL's CAHVOR as mrcal parametrises it (docs/lens-models.md, "CAHVOR"), intrinsics
 //! fx fy cx cy α β r0 r1 r2: a radial stretch about the axis o = (sin α cos β, sin β, cos α cos β),
 //! ω = p·o, τ = |p|²/ω² − 1, μ = r0 + r1 τ + r2 τ², p' = p + μ (p − ω o), then a pinhole.
 

@@ -1,4 +1,4 @@
-//! mrcal's closed-form central models (LENS-MODELS.md §4.3–4.5), intrinsics fx fy cx cy:
+//! mrcal's closed-form central models (docs/lens-models.md), intrinsics fx fy cx cy:
 //!
 //! * STEREOGRAPHIC: u = 2·(x, y)/(|p| + z), q = f·u + c; everything but straight behind.
 //! * LONLAT: lon = atan2(x, z), lat = asin(y/|p|), q = (fx·lon + cx, fy·lat + cy).

@@ -1,4 +1,4 @@
-//! OpenCV's fisheye model (Kannala–Brandt; LENS-MODELS.md §3), intrinsics fx fy cx cy k1..k4:
+//! OpenCV's fisheye model (Kannala–Brandt; docs/lens-models.md), intrinsics fx fy cx cy k1..k4:
 //! θ = angle from the axis, θ_d = θ·(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸), and the pixel lies at
 //! radius θ_d (in focal units) in the point's azimuth. Rays at 90° or more from the axis cannot
 //! be represented (OpenCV would project their antipode); they are refused.

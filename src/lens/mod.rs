@@ -1,6 +1,6 @@
 //! Lens models: a projector is an inverse camera, so every projector pixel's ray comes from its
 //! lens model's unprojection. Names, intrinsics layouts and pixel conventions follow mrcal and
-//! OpenCV (LENS-MODELS.md): intrinsics start fx, fy, cx, cy; pixel (0, 0) is the centre of the
+//! OpenCV (docs/lens-models.md): intrinsics start fx, fy, cx, cy; pixel (0, 0) is the centre of the
 //! top-left pixel; the camera frame has x right, y down, z forward.
 //!
 //! Every formula is written once, generic over [`Real`], so that the same code runs on plain

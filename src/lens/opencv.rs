@@ -1,6 +1,7 @@
 //! OpenCV's pinhole model with 4, 5, 8, 12 or 14 distortion coefficients
 //! (`distCoeffs = k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4 [τx τy]]]]`, missing terms 0), and the
-//! plain pinhole as the case without distortion. LENS-MODELS.md §2.2, in OpenCV's order:
+//! plain pinhole as the case without distortion. docs/lens-models.md ("OpenCV pinhole"), in
+//! OpenCV's order:
 //!
 //! x' = x/z, y' = y/z, r² = x'² + y'²,
 //! g = (1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶),

@@ -1,9 +1,9 @@
 //! mrcal's `LENSMODEL_SPLINED_STEREOGRAPHIC_order=O_Nx=NX_Ny=NY_fov_x_deg=F`
-//! (LENS-MODELS.md §4.8): the stereographic coordinate u = 2·(x, y)/(|p| + z) plus a correction
-//! Δu from two B-spline surfaces (order 2 or 3) whose NX × NY control values follow fx fy cx cy,
-//! interleaved (Δuₓ, Δu_y) with x fastest; q = f·(u + Δu) + c. Knots are spaced
-//! s⁻¹ = 2·u_edge/(NX − 1 − m) apart (m = 2 for cubic, 1 for quadratic) with
-//! u_edge = 2·tan(F/4); outside the grid the nearest patch extrapolates.
+//! (docs/lens-models.md, "splined stereographic"): the stereographic coordinate u = 2·(x, y)/(|p| +
+//! z) plus a correction Δu from two B-spline surfaces (order 2 or 3) whose NX × NY control values
+//! follow fx fy cx cy, interleaved (Δuₓ, Δu_y) with x fastest; q = f·(u + Δu) + c. Knots are spaced
+//! s⁻¹ = 2·u_edge/(NX − 1 − m) apart (m = 2 for cubic, 1 for quadratic) with u_edge = 2·tan(F/4);
+//! outside the grid the nearest patch extrapolates.
 
 use super::Real;
 

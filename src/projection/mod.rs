@@ -5,6 +5,7 @@
 //! (content orientation C, off-axis vector O, zoom) lives once in [`view`]. Each projection has
 //! one row in [`REGISTRY`]: its name, what it is, the parameters it takes and its constructor.
 //! A parameter given to a projection that does not use it is an error, not silently ignored.
+//! Every formula has a WGSL twin in `shaders/projections.wgsl`, which the GPU warp pass uses.
 
 mod cylindrical;
 mod cylindrical_vertical;

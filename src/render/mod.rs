@@ -4,9 +4,11 @@
 //! and content layout (for every output sample: the sampling vector V, in f64, turned into an
 //! atlas position), then [`Plan::render`] filters any number of frames of content through it.
 //! The per-frame step reads 8 bytes of plan and 4 texels per output pixel, with integer
-//! arithmetic for 8-bit bilinear output, and runs on all cores (rayon, one task per row).
+//! arithmetic for 8-bit bilinear output, and runs on all cores (rayon, one task per row). The
+//! GPU's twin is the warp pass, `shaders/warp.wgsl`, held to this path by `tests/gpu.rs`.
 
 pub mod blur;
+pub mod coverage;
 mod plan;
 
 pub use crate::raster::{MAX_SAMPLES, Tap, check_size};

@@ -1,6 +1,6 @@
 //! The rig: one versioned JSON document (`"format": 1`) with the screen, the viewer's eye
-//! point, the content orientation and the projector channels (DESIGN.md). Errors name the field
-//! by its JSON pointer (`/channels/1/lens/intrinsics`) and say why.
+//! point, the content orientation and the projector channels (docs/conventions.md). Errors name the
+//! field by its JSON pointer (`/channels/1/lens/intrinsics`) and say why.
 //!
 //! A channel's pose is the projector-to-world transform: `position` plus either `look_to` and
 //! `look_up` or `rvec` (OpenCV's Rodrigues vector of that rotation; note that OpenCV's

@@ -3,8 +3,8 @@
 //! actually lights, a miss, or a grazing hit (light arriving within [`GRAZING_DEG`] of the
 //! surface's tangent plane, which spreads a pixel over too much wall to be trusted).
 //!
-//! World frame as DESIGN.md: metres, +y up, −z ahead. Azimuths are measured like longitude:
-//! 0 towards −z, positive towards +x.
+//! World frame as docs/conventions.md: metres, +y up, −z ahead. Azimuths are measured like
+//! longitude: 0 towards −z, positive towards +x.
 
 mod mesh;
 mod shapes;

@@ -20,7 +20,8 @@
 //! position F of the following sentence ("δT(F·s) = N"), not as a summand: adding a screen
 //! position to a unit direction would make the normal depend on where a tile sits on screen
 //! rather than on its features, and no tile screen sampled from a projection could then
-//! reproduce it. With DESIGN.md's frame (−z ahead, +y up) and φ as longitude, θ as latitude:
+//! reproduce it. With docs/conventions.md's frame (−z ahead, +y up) and φ as longitude, θ as
+//! latitude:
 //!
 //!   N = (cos θ'·sin φ', sin θ', −cos θ'·cos φ'),  φ' = φ·scale, θ' = θ·scale,
 //!

@@ -3,7 +3,7 @@
 //! The GPU's cube-map pass (`src/gpu/cube.rs`) draws only these faces; the CPU ray caster
 //! (`src/scene/raycast.rs`) uses the same size.
 
-use super::{Face, face_point, select};
+use crate::cubemap::{Face, face_point, select};
 use crate::normalmap::NormalMap;
 use rayon::prelude::*;
 
