@@ -715,6 +715,22 @@ fn rig_warp_blend_and_render_from_the_command_line() {
             .iter()
             .any(|(k, v)| k == "omniwarp.channel" && v == "left")
     );
+    // The wall points lie on the rig's plane z = −3 where the warp is valid, nowhere else,
+    // and the sampling vector points from the eye to them.
+    let (wall, _) = omniwarp::image_io::read_exr_rgba(&s.path("left-wall.exr")).unwrap();
+    let mut lit = 0;
+    for (k, p) in wall.data.iter().enumerate() {
+        let d = map.direction(k % 1920, k / 1920);
+        assert_eq!(p[3] > 0.5, d.is_some(), "pixel {k}");
+        if let Some(d) = d {
+            lit += 1;
+            assert!((p[2] + 3.0).abs() < 1e-4, "pixel {k}: {p:?}");
+            let to = glam::DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            // The rig's eye is the origin and the content is not turned: V ∥ P.
+            assert!(d.angle_between(to) < 1e-4, "pixel {k}");
+        }
+    }
+    assert!(lit > 1920 * 1080 / 2, "{lit} pixels light the wall");
     let (ok, err) = s.run(&["blend", "--rig", rig, "--out-dir", "blend"]);
     assert!(ok, "{err}");
     let decoder = png::Decoder::new(std::io::BufReader::new(
@@ -953,12 +969,15 @@ fn export_writes_stmap_pfm_and_remap_maps() {
     assert!(ok, "{err}");
     let (w, h, xyz) = omniwarp::export::read_pfm(&s.path("a3.pfm")).unwrap();
     assert_eq!((w, h), (1920, 1080));
-    // The wall is the plane z = −3.
+    // The wall is the plane z = −3; the left projector lights 77.0 % of its pixels on it.
+    let lit: Vec<_> = xyz.iter().filter(|p| !p[2].is_nan()).collect();
     assert!(
-        xyz.iter()
-            .filter(|p| !p[2].is_nan())
-            .all(|p| (p[2] + 3.0).abs() < 1e-4)
+        lit.len() * 10 > xyz.len() * 7,
+        "{} of {} lit",
+        lit.len(),
+        xyz.len()
     );
+    assert!(lit.iter().all(|p| (p[2] + 3.0).abs() < 1e-4));
     let mut rm = vec![
         "export",
         "--rig",
@@ -976,6 +995,26 @@ fn export_writes_stmap_pfm_and_remap_maps() {
     rm.extend(["--ymap", "y.pgm"]);
     let (ok, err) = s.run(&rm);
     assert!(ok, "{err}");
+    // The ST-map and the remap maps say the same: x = u·W − ½, y = (1 − v_st)·H − ½, rounded,
+    // and both are unmapped in the same places; most of the projector shows content.
+    let (st, _) = omniwarp::image_io::read_exr_rgba(&s.path("st.exr")).unwrap();
+    let (xmap, ymap) = (pgm16(&s.path("x.pgm")), pgm16(&s.path("y.pgm")));
+    assert_eq!((st.width, st.height), (1920, 1080));
+    assert_eq!((xmap.len(), ymap.len()), (1920 * 1080, 1920 * 1080));
+    let mut mapped = 0;
+    for ((p, &x), &y) in st.data.iter().zip(&xmap).zip(&ymap) {
+        if p[3] == 0.0 {
+            assert_eq!((x, y), (65535, 65535));
+            continue;
+        }
+        mapped += 1;
+        let ex = (f64::from(p[0]) * 1920.0 - 0.5).round().clamp(0.0, 1919.0);
+        let ey = ((1.0 - f64::from(p[1])) * 1080.0 - 0.5)
+            .round()
+            .clamp(0.0, 1079.0);
+        assert!((f64::from(x) - ex).abs() <= 1.0 && (f64::from(y) - ey).abs() <= 1.0);
+    }
+    assert!(mapped > 1920 * 1080 / 2, "{mapped} pixels mapped");
     let (ok, err) = s.run(&[
         "export",
         "--rig",
@@ -1031,6 +1070,21 @@ fn export_writes_meshes_2d_grids_and_mpcdi_packages() {
     );
     let (ok, err) = run("pfm2d", "left.pfm", &["--channel", "left"]);
     assert!(ok, "{err}");
+    // A grid coarser than the projector, of canvas coordinates in [0, 1] where the wall is lit.
+    let (gw, gh, xy) = omniwarp::export::read_pfm(&s.path("left.pfm")).unwrap();
+    let valid: Vec<_> = xy.iter().filter(|p| !p[0].is_nan()).collect();
+    assert!(gw > 2 && gw < 1920 && gh > 2 && gh < 1080, "{gw}×{gh}");
+    assert!(
+        valid.len() > xy.len() / 2,
+        "{} of {} nodes",
+        valid.len(),
+        xy.len()
+    );
+    assert!(
+        valid
+            .iter()
+            .all(|p| (-0.1..=1.1).contains(&p[0]) && (-0.1..=1.1).contains(&p[1]))
+    );
     let (ok, err) = run("mpcdi", "rig.mpcdi", &[]);
     assert!(ok, "{err}");
     let pkg = omniwarp::export::mpcdi::read(&std::fs::read(s.path("rig.mpcdi")).unwrap()).unwrap();
@@ -1164,4 +1218,21 @@ fn the_city_written_as_gltf_renders_exactly_like_the_built_in_one() {
     assert!(!ok && err.contains("--city"), "{err}");
     let (ok, err) = s.run(&["scene", "--out", "x.fbx"]);
     assert!(!ok && err.contains("--out"), "{err}");
+}
+
+/// The samples of a 16-bit binary PGM (ffmpeg's remap maps), row by row.
+fn pgm16(path: &Path) -> Vec<u16> {
+    let bytes = std::fs::read(path).unwrap();
+    let text = String::from_utf8_lossy(&bytes[..32.min(bytes.len())]).into_owned();
+    let mut fields = text.split_ascii_whitespace();
+    assert_eq!(fields.next(), Some("P5"));
+    let (w, h): (usize, usize) = (
+        fields.next().unwrap().parse().unwrap(),
+        fields.next().unwrap().parse().unwrap(),
+    );
+    assert_eq!(fields.next(), Some("65535"));
+    let body = &bytes[bytes.len() - 2 * w * h..];
+    body.chunks(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect()
 }

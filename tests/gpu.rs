@@ -20,6 +20,9 @@ fn gpu() -> Gpu {
         .expect("no GPU adapter: install mesa-vulkan-drivers (scripts/test does)")
 }
 
+/// Odd output sizes (1×1 to 333×77) against the CPU: measured 52.5–53.6 dB.
+const ODD_SIZES_DB: f64 = 50.5;
+
 fn smooth_cube(face: usize) -> CubeMap<[u8; 4]> {
     CubeMap::from_fn(face, 2, |d| {
         <[u8; 4] as omniwarp::raster::Pixel>::from_f32(Pattern::Smooth.eval(d).map(|c| c * 255.0))
@@ -145,7 +148,9 @@ fn the_gpu_warp_matches_the_cpu_renderer_for_every_projection() {
         let (db, differ) = compare(&reference, &analytic);
         eprintln!("{name}: analytic {db:.1} dB, {differ} pixels shown by one only");
         assert!(
-            db >= 45.0 && differ <= 3,
+            // Measured 53.1–55.8 dB (equisolid 360° and orthographic lowest: f32 at their
+            // rims); a 0.1 px shift of either costs far more than the margin.
+            db >= 51.0 && differ <= 3,
             "{name}: {db} dB, {differ} differ"
         );
         // Through the normal map: the same directions, computed on the CPU in f64.
@@ -156,7 +161,8 @@ fn the_gpu_warp_matches_the_cpu_renderer_for_every_projection() {
         let (db, differ) = compare(&cpu(&cube, Warp::Map(&map), w, h), &via_map);
         eprintln!("{name}: normal map {db:.1} dB, {differ}");
         assert!(
-            db >= 45.0 && differ == 0,
+            // Measured 55.2–55.8 dB.
+            db >= 53.0 && differ == 0,
             "{name} via normal map: {db} dB, {differ} differ"
         );
     }
@@ -195,7 +201,8 @@ fn odd_sizes_read_back_correctly_and_f_desaturates() {
             .unwrap();
         assert_eq!((got.width, got.height), (w as usize, h as usize));
         let (db, differ) = compare(&reference, &got);
-        assert!(db >= 45.0 && differ == 0, "{w}×{h}: {db} dB");
+        eprintln!("{w}×{h}: {db:.1} dB");
+        assert!(db >= ODD_SIZES_DB && differ == 0, "{w}×{h}: {db} dB");
     }
     // f = 0 on the left half: grey there, untouched on the right.
     let (w, h) = (64, 32);

@@ -67,7 +67,8 @@ fn the_towers_stand_at_the_compass_points_on_both_renderers() {
     // The two cube-map passes differ only along edges (rasterised vs ray-cast).
     let db = psnr(&images[0], &images[1], 255.0, |_, _| true);
     eprintln!("city, GPU vs CPU: {db:.1} dB");
-    assert!(db > 30.0, "{db} dB");
+    // Measured 57.2 dB: the two passes differ only along triangle edges.
+    assert!(db > 54.0, "{db} dB");
 }
 
 #[test]
@@ -292,5 +293,6 @@ fn the_cpu_blur_matches_the_gpu_blur() {
     }
     let db = psnr(&out[0], &out[1], 255.0, |_, _| true);
     eprintln!("blurred city, GPU vs CPU: {db:.1} dB");
-    assert!(db > 30.0, "{db} dB");
+    // Measured 67.0 dB.
+    assert!(db > 64.0, "{db} dB");
 }

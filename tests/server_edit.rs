@@ -14,6 +14,9 @@ fn edits(list: serde_json::Value) -> String {
     serde_json::json!({ "edits": list }).to_string()
 }
 
+/// The daemon's GPU preview against its CPU preview: measured 57.2 dB.
+const PREVIEW_DB: f64 = 54.0;
+
 #[tokio::test]
 async fn content_canvas_has_its_own_revision_and_named_errors() {
     let s = state(None, None);
@@ -727,7 +730,8 @@ async fn previews_render_on_the_gpu_like_on_the_cpu() {
         .sum::<f64>()
         / (3.0 * f64::from(a.width() * a.height()));
     let db = 10.0 * (255.0f64.powi(2) / mse.max(1e-12)).log10();
-    assert!(db > 45.0, "GPU preview vs CPU: {db:.1} dB");
+    eprintln!("GPU preview vs CPU: {db:.1} dB");
+    assert!(db > PREVIEW_DB, "GPU preview vs CPU: {db:.1} dB");
     for (q, field) in [
         ("renderer=quantum", "renderer"),
         ("renderer=gpu&format=exr", "renderer"),

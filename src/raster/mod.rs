@@ -207,6 +207,10 @@ impl<T: Pixel> Raster<T> {
 
 /// Peak signal-to-noise ratio in dB over the RGB channels of the pixels where `mask` holds,
 /// with `peak` the largest value (255 for 8-bit). Infinite for identical images.
+///
+/// Panics when the mask selects no pixel: "no difference over nothing" would otherwise read
+/// as a perfect score, and a render that lost all its coverage would pass every comparison.
+/// Callers should also check how much the mask covers ([`fraction`]).
 pub fn psnr<T: Pixel>(
     a: &Raster<T>,
     b: &Raster<T>,
@@ -232,6 +236,16 @@ pub fn psnr<T: Pixel>(
             n += 3;
         }
     }
-    let mse = sum / n.max(1) as f64;
+    assert!(n > 0, "psnr over an empty mask: no pixel to compare");
+    let mse = sum / n as f64;
     10.0 * (peak * peak / mse).log10()
+}
+
+/// The fraction of a width × height image's pixels where `mask` holds.
+pub fn fraction(width: usize, height: usize, mask: impl Fn(usize, usize) -> bool) -> f64 {
+    let n = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .filter(|&(x, y)| mask(x, y))
+        .count();
+    n as f64 / (width * height).max(1) as f64
 }
