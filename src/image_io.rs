@@ -142,10 +142,18 @@ pub fn atomic_write(
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
+    // The temporary file is an implementation detail: a failure to create it is reported
+    // against the file the caller asked for, with the operating system's reason.
     let mut tmp = tempfile::Builder::new()
         .prefix(".omniwarp-")
         .tempfile_in(dir)
-        .map_err(|e| Error::file(dir, e))?;
+        .map_err(|e| {
+            // tempfile's message ends with the temporary path (" at path …"); keep the OS
+            // reason and its kind.
+            let text = e.to_string();
+            let reason = text.split(" at path ").next().unwrap_or(&text).to_string();
+            Error::file(path, std::io::Error::new(e.kind(), reason))
+        })?;
     write(tmp.as_file_mut())?;
     // Temporary files are private (0600); the result should be as readable as any new file.
     #[cfg(unix)]

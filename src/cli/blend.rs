@@ -30,8 +30,10 @@ pub fn run(a: BlendArgs) -> Result<()> {
         let w = rig.warp(ch);
         let weights = rig.blend_weights(ch, &w.points);
         let path = a.out_dir.join(format!("{}.png", ch.id));
-        write_blend_png(&path, ch.width, ch.height, &weights, opts)
-            .map_err(|e| anyhow::anyhow!("--gamma: {}", e.reason()))?;
+        write_blend_png(&path, ch.width, ch.height, &weights, opts).map_err(|e| match e {
+            omniwarp::Error::Invalid { reason, .. } => anyhow::anyhow!("--gamma: {reason}"),
+            other => other.into(),
+        })?;
         eprintln!(
             "{}: warp and blend in {:.0} ms → {}",
             ch.id,

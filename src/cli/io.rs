@@ -67,6 +67,10 @@ pub fn to_u8(p: [f32; 4]) -> [u8; 4] {
 }
 
 pub fn write_output(path: &Path, img: AnyRaster, attrs: &[(String, String)]) -> Result<()> {
+    write_image(path, img, attrs).context("--out")
+}
+
+fn write_image(path: &Path, img: AnyRaster, attrs: &[(String, String)]) -> Result<()> {
     if is_exr(path) {
         let f = match img {
             AnyRaster::U8(r) => r.map(to_float),
@@ -159,10 +163,17 @@ pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
 }
 
 /// One line about a tile screen's accuracy against the exact warp.
-pub fn print_report(prefix: &str, r: &Report) {
-    println!(
+pub fn print_report(prefix: &str, r: &Report) -> Result<()> {
+    outln!(
         "{prefix}grid {}×{} ({} features): max error {:.4}° ({:.3} px), RMS {:.4}°, {} pixels \
          uncovered",
-        r.columns, r.rows, r.features, r.max_deg, r.max_px, r.rms_deg, r.uncovered
+        r.columns,
+        r.rows,
+        r.features,
+        r.max_deg,
+        r.max_px,
+        r.rms_deg,
+        r.uncovered
     );
+    Ok(())
 }

@@ -98,8 +98,8 @@ pub fn run(cmd: LensCommand) -> Result<()> {
         }
     };
     if out.is_empty() {
-        bail!("no input: give at least one point or pixel");
+        bail!("--points/--pixels: no input; give at least one point or pixel");
     }
-    println!("{}", serde_json::to_string(&out)?);
+    outln!("{}", serde_json::to_string(&out)?);
     Ok(())
 }

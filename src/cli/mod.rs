@@ -4,6 +4,15 @@
 //! degrees, every size in pixels; outputs are written atomically, so a failed run leaves no file
 //! behind.
 
+/// `println!` that hands a failed write (a closed pipe: `omniwarp … | head`) back to the caller
+/// instead of panicking; [`main`] ends such a run quietly.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout(), $($t)*)?;
+    }};
+}
+
 mod args;
 mod bench;
 mod blend;

@@ -10,9 +10,9 @@ pub fn run() -> Result<()> {
         } else {
             format!(" (also {})", e.aliases.join(", "))
         };
-        println!("{}{aliases}: {}", e.name, e.description);
+        outln!("{}{aliases}: {}", e.name, e.description);
         for (p, what) in e.params {
-            println!("    --{p:<7} {what} (degrees)");
+            outln!("    --{p:<7} {what} (degrees)");
         }
     }
     Ok(())

@@ -69,7 +69,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
         let addr = listener.local_addr()?;
         tracing::info!(%addr, "omniwarp serving /v1");
         // On stdout too, so scripts and tests that bind port 0 learn the port.
-        println!("listening on http://{addr}");
+        outln!("listening on http://{addr}");
         std::io::Write::flush(&mut std::io::stdout())?;
         launch(listener, state, shutdown_signal()).await?;
         tracing::info!("stopped");

@@ -85,7 +85,7 @@ pub fn run(cmd: TilesCommand) -> Result<()> {
                 })?,
                 _ => bail!("--grid: give --grid MxN, --tolerance-deg or --tolerance-px"),
             };
-            print_report("", &report);
+            print_report("", &report)?;
             let json = screen.to_json();
             image_io::atomic_write(&a.out, |f| {
                 use std::io::Write;

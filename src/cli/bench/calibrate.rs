@@ -28,9 +28,13 @@ pub fn run() -> Result<()> {
     let r = f.cross(DVec3::Y).normalize();
     let rot = DMat3::from_cols(r, f.cross(r), f);
     let pos = DVec3::new(0.2, -0.3, 0.4);
-    println!(
+    outln!(
         "{:>6} {:>10} {:>10} {:>10} {:>10}",
-        "points", "PINHOLE", "OPENCV4", "OPENCV5", "OPENCV8"
+        "points",
+        "PINHOLE",
+        "OPENCV4",
+        "OPENCV5",
+        "OPENCV8"
     );
     for n in [50usize, 500, 5000] {
         let side = (n as f64 * 16.0 / 9.0).sqrt().ceil() as usize;
@@ -80,7 +84,7 @@ pub fn run() -> Result<()> {
                 .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
             row += &format!(" {:>8.1}ms", t.elapsed().as_secs_f64() * 1e3);
         }
-        println!("{row}");
+        outln!("{row}");
     }
     Ok(())
 }

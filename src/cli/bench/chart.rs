@@ -67,7 +67,7 @@ fn chart(out: &Path) -> Result<()> {
         for &c in &columns {
             let screen = from_source(&source, c, rows_for(c, w, h))?;
             let r = measure(&screen, &truth, w, h);
-            print_report(&format!("{label:<22} {w}×{h}: "), &r);
+            print_report(&format!("{label:<22} {w}×{h}: "), &r)?;
             if r.uncovered == 0 && r.max_deg > 0.0 {
                 points.push((c as f64, r.max_deg));
             }

@@ -52,12 +52,12 @@ pub fn run(a: GpuBenchArgs) -> Result<()> {
         let scene = Scene::load(&format!("city:{name}"))?;
         let mut gpu = SceneRenderer::new(scene.clone(), Renderer::Gpu, a.adapter.as_deref())?;
         let mut cpu = SceneRenderer::new(scene.clone(), Renderer::Cpu, None)?;
-        println!(
+        outln!(
             "city:{name} ({} triangles), 1600×1200 cylindrical 120°×60°, {}",
             scene.triangles(),
             gpu.describe()
         );
-        println!("  face | all 6 faces | CMF (faces) | CPU reference | CPU / GPU (CMF)");
+        outln!("  face | all 6 faces | CMF (faces) | CPU reference | CPU / GPU (CMF)");
         let mut face = 128;
         while face <= a.max_face {
             let o = FrameOptions {
@@ -82,7 +82,7 @@ pub fn run(a: GpuBenchArgs) -> Result<()> {
             } else {
                 None
             };
-            println!(
+            outln!(
                 "  {face:>4} | {all:>8.0} ms | {cmf:>6.0} ms ({faces}) | {} | {}",
                 cpu_ms.map_or("      —".into(), |c| format!("{c:>7.0} ms")),
                 cpu_ms.map_or("—".into(), |c| format!("{:.1}×", c / cmf))

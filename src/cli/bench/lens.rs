@@ -52,10 +52,14 @@ pub fn run() -> Result<()> {
         ),
     ];
     let n = 100_000;
-    println!("{n} points per model; points per second (millions)");
-    println!(
+    outln!("{n} points per model; points per second (millions)");
+    outln!(
         "{:<26} {:>10} {:>10} {:>10} {:>10}",
-        "model", "proj 1T", "proj all", "unproj 1T", "unproj all"
+        "model",
+        "proj 1T",
+        "proj all",
+        "unproj 1T",
+        "unproj all"
     );
     // The splined model's name carries its configuration; the table shows the family.
     let short = |name: &str| name.split("_order").next().unwrap_or(name).to_string();
@@ -94,7 +98,7 @@ pub fn run() -> Result<()> {
                 .count()
                 .max(1)
         });
-        println!(
+        outln!(
             "{:<26} {p1:>10.2} {pn:>10.2} {u1:>10.2} {un:>10.2}",
             short(name)
         );

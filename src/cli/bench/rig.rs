@@ -97,7 +97,7 @@ pub fn run(dome_rig: &Path) -> Result<()> {
             let w = rig.warp(&rig.channels[0]);
             let s = t.elapsed().as_secs_f64();
             std::hint::black_box(&w);
-            println!(
+            outln!(
                 "warp 3840×2160, {lens:<18} on {name:<22} {:>7.0} ms  {:>5.1} Mpixel/s",
                 s * 1e3,
                 3840.0 * 2160.0 / s / 1e6
@@ -112,7 +112,7 @@ pub fn run(dome_rig: &Path) -> Result<()> {
     for (c, w) in rig.channels.iter().zip(&warps) {
         std::hint::black_box(rig.blend_weights(c, &w.points));
     }
-    println!(
+    outln!(
         "dome example, {} projectors of {}×{}: warps {:.0} ms, blends {:.0} ms",
         rig.channels.len(),
         rig.channels[0].width,

@@ -64,7 +64,7 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         let _ = stopped.await;
     }));
     let channels = ["left", "centre", "right"];
-    println!(
+    outln!(
         "demo rig (3 × 1920×1080), data on {}; {} clients × {} tile edits, renders of `centre` at 1920×1080",
         dir.path().display(),
         a.clients,
@@ -138,23 +138,23 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     editing.store(false, Ordering::Relaxed);
     let mut busy = render_thread.join().expect("render thread")?;
     let n = latencies.len();
-    println!(
+    outln!(
         "edits: {n} in {took:.1} s = {:.0} edits/s ({attempts} attempts, {:.1} per edit)",
         n as f64 / took,
         attempts as f64 / n as f64
     );
-    println!(
+    outln!(
         "edit latency (first attempt → durable ack): p50 {:.1} ms, p99 {:.1} ms",
         percentile(&mut latencies, 0.5),
         percentile(&mut latencies, 0.99)
     );
-    println!(
+    outln!(
         "1080p preview alone ({} renders): p50 {:.0} ms, p99 {:.0} ms",
         quiet.len(),
         percentile(&mut quiet, 0.5),
         percentile(&mut quiet, 0.99)
     );
-    println!(
+    outln!(
         "1080p preview while edits stream ({} renders): p50 {:.0} ms, p99 {:.0} ms",
         busy.len(),
         percentile(&mut busy, 0.5),

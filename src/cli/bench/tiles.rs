@@ -15,7 +15,7 @@ pub fn run() -> Result<()> {
         },
         9.0 / 16.0,
     );
-    println!("normal map from a fisheye 200° tile screen (vector interpolation), all cores");
+    outln!("normal map from a fisheye 200° tile screen (vector interpolation), all cores");
     for (w, h) in [(1920usize, 1080usize), (3840, 2160)] {
         for columns in [9usize, 33, 129, 513] {
             let screen = from_source(&source, columns, rows_for(columns, w, h))?;
@@ -26,7 +26,7 @@ pub fn run() -> Result<()> {
                 std::hint::black_box(&map);
                 best = best.min(t.elapsed().as_secs_f64());
             }
-            println!("  {w}×{h}, {columns:>3} columns: {:>7.1} ms", best * 1e3);
+            outln!("  {w}×{h}, {columns:>3} columns: {:>7.1} ms", best * 1e3);
         }
     }
     Ok(())

@@ -61,7 +61,7 @@ fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
     let cube = CubeMap::<[u8; 4]>::from_fn(n, 1, |d| to_u8(Pattern::Smooth.eval(d)));
     if let Some(path) = &a.write_content {
         image_io::write_png(path, &Layout::FfmpegC6x1.join(&cube))?;
-        println!(
+        outln!(
             "wrote {} ({}s to make)",
             path.display(),
             t.elapsed().as_secs_f32()
@@ -97,23 +97,23 @@ fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
     let bytes_per_pixel = 16.0 + texture / (f64::from(w) * f64::from(h));
     let bound = bandwidth / bytes_per_pixel / 1e6;
 
-    println!("omniwarp CPU warp, bilinear, RGBA8, {threads} threads");
-    println!("  content          6 × {n}² cube map");
-    println!("  output           {w}×{h} {}", view.projection().name());
-    println!("  plan (once)      {plan_ms:.1} ms");
-    println!(
+    outln!("omniwarp CPU warp, bilinear, RGBA8, {threads} threads");
+    outln!("  content          6 × {n}² cube map");
+    outln!("  output           {w}×{h} {}", view.projection().name());
+    outln!("  plan (once)      {plan_ms:.1} ms");
+    outln!(
         "  frame (median)   {:.2} ms over {} frames (min {:.2}, max {:.2})",
         median * 1e3,
         times.len(),
         times[0] * 1e3,
         times[times.len() - 1] * 1e3
     );
-    println!("  throughput       {:.0} Mpixel/s", mpix / median);
-    println!(
+    outln!("  throughput       {:.0} Mpixel/s", mpix / median);
+    outln!(
         "  memory copy      {:.1} GB/s (read + write)",
         bandwidth / 1e9
     );
-    println!(
+    outln!(
         "  bandwidth bound  {bound:.0} Mpixel/s at {bytes_per_pixel:.1} bytes/pixel; we reach {:.0} %",
         100.0 * mpix / median / bound
     );
@@ -123,7 +123,7 @@ fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
         let exact = exact()?;
         let score =
             |img: &Raster<[u8; 4]>| psnr(img, &exact, 255.0, |x, y| exact.get(x, y)[3] == 255);
-        println!("  PSNR vs exact    omniwarp {:.2} dB", score(&frame));
+        outln!("  PSNR vs exact    omniwarp {:.2} dB", score(&frame));
         for path in &a.psnr_of {
             let img = match image_io::read_image(path)
                 .with_context(|| format!("--psnr-of {}", path.display()))?
@@ -139,7 +139,7 @@ fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
                     img.height
                 );
             }
-            println!(
+            outln!(
                 "  PSNR vs exact    {} {:.2} dB",
                 path.display(),
                 score(&img)
