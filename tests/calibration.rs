@@ -284,7 +284,8 @@ fn model_selection_picks_the_generating_model_and_says_why() {
                 lens.model(),
                 c.model,
                 c.rms,
-                c.held_out_rms,
+                c.held_out_rms
+                    .expect("auto compares models on held-out points"),
                 c.verdict
             );
         }

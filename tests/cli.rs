@@ -829,14 +829,13 @@ fn rig_warp_blend_and_render_from_the_command_line() {
 #[test]
 fn calibrate_writes_a_channel_that_drops_into_a_rig() {
     let s = Scene::new();
-    let fixture = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("calibration/fixtures/calibration/opencv_cylinder.json"),
+    // The example file the README names (the oracle's points, in the one format the CLI and
+    // the daemon both read).
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/examples/points.json"),
+        s.path("c.json"),
     )
     .unwrap();
-    let v: serde_json::Value = serde_json::from_str(&fixture).unwrap();
-    let input = serde_json::json!({ "resolution": v["resolution"], "points": v["points"] });
-    std::fs::write(s.path("c.json"), input.to_string()).unwrap();
     let (ok, err) = s.run(&[
         "calibrate",
         "--correspondences",

@@ -744,3 +744,40 @@ async fn previews_render_on_the_gpu_like_on_the_cpu() {
         );
     }
 }
+
+/// The example correspondences the README posts are the file the CLI reads, unchanged: the demo
+/// rig's 1920×1080 channel takes it, a projector of another size refuses it by field.
+#[tokio::test]
+async fn the_cli_and_the_daemon_read_one_correspondences_format() {
+    let file = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/examples/points.json"),
+    )
+    .unwrap();
+    let demo = common::server::state_with(
+        None,
+        None,
+        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+    );
+    let (st, _, body) = call(
+        &demo,
+        write("POST", "/v1/channels/left/calibration", None, file.clone()),
+    )
+    .await;
+    assert_eq!(
+        st,
+        StatusCode::CREATED,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    assert!(json(&body)["rms"].as_f64().unwrap() < 1.0);
+    let small = state(None, None);
+    let (st, _, body) = call(
+        &small,
+        write("POST", "/v1/channels/left/calibration", None, file),
+    )
+    .await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/resolution"))
+    );
+}

@@ -33,6 +33,83 @@ pub struct Correspondence {
     pub world: [f64; 3],
 }
 
+/// A calibration request as a file (`omniwarp calibrate --correspondences F`) or a request body
+/// (`POST /v1/channels/{id}/calibration`): one format for both, so a file measured once can be
+/// posted as it is. Example: `calibration/examples/points.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CorrespondencesDoc {
+    /// The projector's width and height in pixels. Needed by the CLI; the daemon knows its
+    /// channel's and refuses a file made for another size.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolution: Option<[u32; 2]>,
+    pub points: Vec<Correspondence>,
+    /// Known intrinsics (kept with `intrinsics_fixed`) or a seed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens: Option<crate::rig::LensDoc>,
+    /// `auto` (PINHOLE → OPENCV4 → 5 → 8 while held-out residuals improve) or a model name;
+    /// `auto` when absent. The CLI's `--model` takes precedence.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    #[serde(default)]
+    pub intrinsics_fixed: bool,
+}
+
+impl CorrespondencesDoc {
+    /// The solver's problem for a projector of `resolution`, and the model choice (`model`
+    /// overrides the document's). Errors name the field by JSON pointer.
+    pub fn problem(
+        &self,
+        resolution: [u32; 2],
+        model: Option<&str>,
+    ) -> crate::Result<(Problem, ModelChoice)> {
+        if let Some(r) = self.resolution
+            && r != resolution
+        {
+            return Err(Error::invalid(
+                "/resolution",
+                format!(
+                    "the points were measured on a {}×{} image, the projector is {}×{}",
+                    r[0], r[1], resolution[0], resolution[1]
+                ),
+            ));
+        }
+        let lens = match &self.lens {
+            Some(l) => {
+                let m: LensModel = l
+                    .model
+                    .parse()
+                    .map_err(|e: Error| Error::invalid("/lens/model", e.reason()))?;
+                Some(
+                    Lens::new(m, l.intrinsics.clone())
+                        .map_err(|e| Error::invalid("/lens/intrinsics", e.reason()))?,
+                )
+            }
+            None => None,
+        };
+        if self.intrinsics_fixed && lens.is_none() {
+            return Err(Error::invalid(
+                "/intrinsics_fixed",
+                "there is no lens to keep: give `lens` with the known intrinsics",
+            ));
+        }
+        let choice = match model.or(self.model.as_deref()).unwrap_or("auto") {
+            "auto" => ModelChoice::Auto,
+            m => ModelChoice::Fixed(
+                m.parse()
+                    .map_err(|e: Error| Error::invalid("/model", e.reason()))?,
+            ),
+        };
+        let problem = Problem {
+            resolution,
+            points: self.points.clone(),
+            lens,
+            intrinsics_fixed: self.intrinsics_fixed,
+        };
+        Ok((problem, choice))
+    }
+}
+
 /// What the solver is asked.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Problem {
@@ -55,8 +132,9 @@ pub enum ModelChoice {
 pub struct Considered {
     pub model: LensModel,
     pub rms: f64,
-    /// 5-fold cross-validated RMS of held-out points, pixels.
-    pub held_out_rms: f64,
+    /// 5-fold cross-validated RMS of held-out points, pixels; only where models were compared
+    /// (`ModelChoice::Auto` with free intrinsics).
+    pub held_out_rms: Option<f64>,
     pub verdict: String,
 }
 
@@ -170,13 +248,15 @@ pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> 
             considered.push(Considered {
                 model,
                 rms: f64::NAN,
-                held_out_rms: f64::NAN,
+                held_out_rms: None,
                 verdict: "too few points for its parameters".into(),
             });
             break;
         }
         let full = fit(problem, model, &problem.points)?;
-        let held_out = if choice == ModelChoice::Auto && !problem.intrinsics_fixed {
+        let compared = choice == ModelChoice::Auto && !problem.intrinsics_fixed;
+        // Without a comparison there is nothing to hold points out for; the plain fit decides.
+        let held_out = if compared {
             cross_validate(problem, model)?
         } else {
             full.rms
@@ -187,7 +267,9 @@ pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> 
             Some((_, prev)) => held_out < 0.98 * prev,
         };
         if better {
-            verdict = if best.is_none() {
+            verdict = if !compared {
+                "the model asked for".to_string()
+            } else if best.is_none() {
                 "first model".to_string()
             } else {
                 format!("held-out RMS improved to {held_out:.4} px")
@@ -195,7 +277,7 @@ pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> 
             considered.push(Considered {
                 model,
                 rms: full.rms,
-                held_out_rms: held_out,
+                held_out_rms: compared.then_some(held_out),
                 verdict,
             });
             best = Some((full, held_out));
@@ -204,7 +286,7 @@ pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> 
             considered.push(Considered {
                 model,
                 rms: full.rms,
-                held_out_rms: held_out,
+                held_out_rms: Some(held_out),
                 verdict: format!(
                     "rejected: held-out RMS {held_out:.4} px is not 2 % better than {prev:.4} px"
                 ),

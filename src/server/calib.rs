@@ -7,67 +7,25 @@ use super::jobs::run_job;
 use super::rig::commit_rig;
 use super::state::{AppState, if_match, parse_body, tagged};
 use super::store::Proposal;
-use crate::calibration::{Correspondence, ModelChoice, Problem, calibrate};
-use crate::lens::Lens;
-use crate::rig::{LensDoc, Rig};
+use crate::calibration::{CorrespondencesDoc, calibrate};
+use crate::rig::Rig;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
-use serde::Deserialize;
 use std::sync::Arc;
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CalibrationBody {
-    points: Vec<Correspondence>,
-    /// `auto` (PINHOLE → OPENCV4 → 5 → 8 while held-out residuals improve) or a model name.
-    #[serde(default)]
-    model: Option<String>,
-    /// Known intrinsics (kept with `intrinsics_fixed`) or a seed.
-    #[serde(default)]
-    lens: Option<LensDoc>,
-    #[serde(default)]
-    intrinsics_fixed: bool,
-}
-
-fn invalid(field: &str, e: crate::Error) -> ApiError {
-    ApiError::Invalid {
-        field: field.into(),
-        reason: e.reason(),
-    }
-}
 
 pub async fn propose(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
     body: Bytes,
 ) -> Result<Response, ApiError> {
-    let b: CalibrationBody = parse_body(&body)?;
+    let b: CorrespondencesDoc = parse_body(&body)?;
     let (rig, rig_revision) = s.store.snapshot();
     let ch = rig
         .channel(&id)
         .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?;
-    let lens = match &b.lens {
-        Some(l) => {
-            let model = l.model.parse().map_err(|e| invalid("/lens/model", e))?;
-            Some(
-                Lens::new(model, l.intrinsics.clone())
-                    .map_err(|e| invalid("/lens/intrinsics", e))?,
-            )
-        }
-        None => None,
-    };
-    let choice = match b.model.as_deref().unwrap_or("auto") {
-        "auto" => ModelChoice::Auto,
-        m => ModelChoice::Fixed(m.parse().map_err(|e| invalid("/model", e))?),
-    };
-    let problem = Problem {
-        resolution: [ch.width, ch.height],
-        points: b.points,
-        lens,
-        intrinsics_fixed: b.intrinsics_fixed,
-    };
+    let (problem, choice) = b.problem([ch.width, ch.height], None)?;
     let resolution = [ch.width, ch.height];
     let cal = run_job(&s, move |_| {
         Some(calibrate(&problem, choice).map_err(|e| match e {
