@@ -26,8 +26,11 @@ pub struct ServeArgs {
 
 pub fn run(a: ServeArgs) -> Result<()> {
     // Logs on stderr; stdout carries only the "listening on" line scripts read.
+    // Colour codes only for a person at a terminal, not in a log file.
+    use std::io::IsTerminal;
     tracing_subscriber::fmt()
         .with_target(false)
+        .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
         .init();
     let token = match &a.token_file {

@@ -43,7 +43,13 @@ pub struct BenchArgs {
     psnr_of: Vec<PathBuf>,
 }
 
-pub fn run(a: BenchArgs) -> Result<()> {
+pub fn run(mut a: BenchArgs) -> Result<()> {
+    // Without a projection: the README's case, a 270°×90° cylinder.
+    if a.projection.projection.is_none() {
+        a.projection.projection = Some("cylindrical".into());
+        a.projection.hfov = a.projection.hfov.or(Some(270.0));
+        a.projection.vfov = a.projection.vfov.or(Some(90.0));
+    }
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
