@@ -43,8 +43,7 @@ fn code(text: &str) -> String {
     let mut out = String::new();
     let mut in_tests = false;
     let mut depth = 0i32;
-    let mut lines = text.lines().peekable();
-    while let Some(line) = lines.next() {
+    for line in text.lines() {
         let t = line.trim_start();
         if t.starts_with("#[cfg(test)]") && !in_tests {
             in_tests = true;
