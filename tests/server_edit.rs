@@ -781,3 +781,69 @@ async fn the_cli_and_the_daemon_read_one_correspondences_format() {
         (StatusCode::BAD_REQUEST, Some("/resolution"))
     );
 }
+
+/// `PUT …/tiles` replaces the whole screen: the geometry's own sampled screen put back gives
+/// nearly the exact warp, one turned by 10° in φ turns the warp by 10°, and the revision rules
+/// and validation of every other write hold.
+#[tokio::test]
+async fn put_tiles_replaces_the_screen_with_revisions_and_validation() {
+    let s = state(None, None);
+    let (_, _, body) = call(&s, get("/v1/channels/left/tiles")).await;
+    let sampled = json(&body)["tiles"].clone();
+    let (_, _, exact) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    let put = |m: Option<u64>, doc: &serde_json::Value| {
+        write("PUT", "/v1/channels/left/tiles", m, doc.to_string())
+    };
+    assert_eq!(
+        call(&s, put(None, &sampled)).await.0,
+        StatusCode::PRECONDITION_REQUIRED
+    );
+    assert_eq!(
+        call(&s, put(Some(7), &sampled)).await.0,
+        StatusCode::PRECONDITION_FAILED
+    );
+    let (st, h, _) = call(&s, put(Some(1), &sampled)).await;
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"2\"")
+    );
+    let (_, h, body) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(h[header::ETAG], "\"2\"");
+    assert_eq!(json(&body)["follows_geometry"], false);
+    let (_, h, same) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert_eq!(h[header::ETAG], "\"1.2\"");
+    // The 33×19 grid of the test rig stays within 0.02° of the exact warp (measured).
+    let err = largest_angle(&exact, &same);
+    assert!(err > 0.0 && err < 0.05, "{err}°");
+
+    let mut turned = sampled.clone();
+    for f in turned["layout"]["features"].as_array_mut().unwrap() {
+        if f["valid"].as_bool().unwrap_or(true) {
+            let phi = f["phi"].as_f64().unwrap();
+            f["phi"] = serde_json::json!(phi + 10.0);
+        }
+    }
+    let (st, _, body) = call(&s, put(Some(2), &turned)).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let (_, _, turned_warp) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    let err = largest_angle(&exact, &turned_warp);
+    assert!((err - 10.0).abs() < 0.5, "{err}°");
+
+    // A screen whose features do not fill its grid is refused by field; nothing changes.
+    let mut short = sampled.clone();
+    short["layout"]["features"].as_array_mut().unwrap().pop();
+    let (st, _, body) = call(&s, put(Some(3), &short)).await;
+    assert_eq!(
+        st,
+        StatusCode::BAD_REQUEST,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    assert!(
+        json(&body)["field"].is_string(),
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    let (_, h, _) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(h[header::ETAG], "\"3\"");
+}
