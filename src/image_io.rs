@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::raster::Raster;
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// An image as read from disk: 8-bit formats stay 8-bit, EXR is float.
 #[derive(Debug, Clone)]
@@ -132,8 +132,69 @@ pub fn read_exr_rgba(path: &Path) -> Result<(Raster<[f32; 4]>, Attributes)> {
     Ok((image.layer_data.channel_data.pixels, attrs))
 }
 
-/// Writes `path` atomically: `write` fills a temporary file beside it, which replaces `path`
-/// only once complete and synced.
+/// One step of a durable write, as [`atomic_write`] takes it. Recorded (and failed on demand)
+/// by [`journal`], so tests can check the order that makes a write survive power loss, which a
+/// killed process cannot show: the page cache outlives the process.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Step {
+    /// The new contents written into a temporary file beside the target.
+    Write { temp: PathBuf, bytes: Vec<u8> },
+    /// The temporary file's contents made durable (fsync).
+    SyncFile { temp: PathBuf },
+    /// The temporary file renamed over the target.
+    Rename { temp: PathBuf, to: PathBuf },
+    /// The directory made durable, and with it the rename (fsync of the directory).
+    SyncDir { dir: PathBuf },
+}
+
+struct Journal {
+    steps: Vec<Step>,
+    fail_at: Option<usize>,
+}
+
+thread_local! {
+    static JOURNAL: std::cell::RefCell<Option<Journal>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` with every [`atomic_write`] step on this thread recorded; with `fail_at = Some(k)`
+/// the k-th step (from 0) fails instead of running, as a full disk or an I/O error would.
+/// Returns what `f` returned and the steps taken (the failed one included).
+pub fn journal<R>(fail_at: Option<usize>, f: impl FnOnce() -> R) -> (R, Vec<Step>) {
+    JOURNAL.with(|j| {
+        *j.borrow_mut() = Some(Journal {
+            steps: Vec::new(),
+            fail_at,
+        })
+    });
+    let out = f();
+    let steps = JOURNAL.with(|j| j.borrow_mut().take().map(|j| j.steps).unwrap_or_default());
+    (out, steps)
+}
+
+/// Takes one step of a durable write: records it if a journal is open, fails it if it is the
+/// step to fail, else runs `op`. Each step's record and its system call are the one call, so a
+/// step left out of [`atomic_write`] is missing from the journal too.
+fn take_step(path: &Path, s: Step, op: impl FnOnce() -> std::io::Result<()>) -> Result<()> {
+    let injected = JOURNAL.with(|j| match j.borrow_mut().as_mut() {
+        None => false,
+        Some(j) => {
+            let failed = j.fail_at == Some(j.steps.len());
+            j.steps.push(s);
+            failed
+        }
+    });
+    if injected {
+        return Err(Error::file(
+            path,
+            std::io::Error::other("injected fault (image_io::journal)"),
+        ));
+    }
+    op().map_err(|e| Error::file(path, e))
+}
+
+/// Writes `path` atomically and durably: `write` fills a temporary file beside it, which is
+/// synced, renamed over `path`, and the directory synced, so that after a crash or power loss
+/// `path` holds either the old contents or the new, and the new once this returns `Ok`.
 pub fn atomic_write(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> Result<()>,
@@ -155,6 +216,21 @@ pub fn atomic_write(
             Error::file(path, std::io::Error::new(e.kind(), reason))
         })?;
     write(tmp.as_file_mut())?;
+    let temp = tmp.path().to_path_buf();
+    let recording = JOURNAL.with(|j| j.borrow().is_some());
+    let bytes = if recording {
+        std::fs::read(&temp).map_err(|e| Error::file(path, e))?
+    } else {
+        Vec::new()
+    };
+    take_step(
+        path,
+        Step::Write {
+            temp: temp.clone(),
+            bytes,
+        },
+        || Ok(()),
+    )?;
     // Temporary files are private (0600); the result should be as readable as any new file.
     #[cfg(unix)]
     {
@@ -164,14 +240,27 @@ pub fn atomic_write(
             .set_permissions(perms)
             .map_err(|e| Error::file(path, e))?;
     }
-    tmp.as_file()
-        .sync_all()
-        .map_err(|e| crate::Error::file(path, e))?;
-    tmp.persist(path).map_err(|e| Error::file(path, e.error))?;
-    // The rename is durable only once the directory entry is.
-    if let Ok(d) = std::fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
+    take_step(path, Step::SyncFile { temp: temp.clone() }, || {
+        tmp.as_file().sync_all()
+    })?;
+    let rename = Step::Rename {
+        temp,
+        to: path.to_path_buf(),
+    };
+    let mut tmp = Some(tmp);
+    take_step(path, rename, || {
+        let t = tmp.take().expect("renamed once");
+        t.persist(path).map(drop).map_err(|e| e.error)
+    })?;
+    // The rename is durable only once the directory entry is; a failure here means the write
+    // may not survive a crash, so it is not reported as done.
+    take_step(
+        path,
+        Step::SyncDir {
+            dir: dir.to_path_buf(),
+        },
+        || std::fs::File::open(dir)?.sync_all(),
+    )?;
     Ok(())
 }
 
