@@ -6,15 +6,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn omniwarp(dir: &Path, args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, err) = status(dir, args);
+    (code == Some(0), err)
 }
 
 /// The exit status of a run, and what it printed on stderr.

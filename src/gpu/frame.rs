@@ -40,7 +40,7 @@ pub struct FrameReport {
 enum Backend {
     Gpu {
         gpu: Box<Gpu>,
-        warp: WarpPass,
+        warp: Box<WarpPass>,
         cube: CubePass,
         target: Option<CubeTexture>,
     },
@@ -85,7 +85,7 @@ impl SceneRenderer {
         };
         let backend = match gpu {
             Some(gpu) => {
-                let warp = WarpPass::new(&gpu);
+                let warp = Box::new(WarpPass::new(&gpu));
                 let cube = CubePass::new(&gpu, &scene);
                 Backend::Gpu {
                     gpu: Box::new(gpu),

@@ -4,11 +4,16 @@
 //! llvmpipe (the CPU) where there is none; with no adapter at all, callers fall back to the CPU
 //! renderer, which stays the accuracy reference.
 //!
-//! Shaders live in `shaders/` (WGSL); `projections.wgsl` mirrors `src/projection/` formula for
-//! formula and is prepended to the passes that need it.
+//! One file per pass — [`cube`] (scenes into the cube map), [`warp`] (the cube map through the
+//! warp), [`blur`] (the radial blur) — with what full-screen passes share in `pass.rs` and the
+//! driver of a whole frame in [`frame`]. Shaders live in `shaders/` (WGSL), each naming its CPU
+//! twin; `projections.wgsl` mirrors `src/projection/` formula for formula and is prepended to
+//! the passes that need it.
 
+pub mod blur;
 pub mod cube;
 pub mod frame;
+mod pass;
 pub mod warp;
 
 use crate::error::{Error, Result};

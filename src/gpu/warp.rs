@@ -2,7 +2,9 @@
 //! → bilinear cube-map sample → optional saturation by the tiles' f → optional radial blur →
 //! readback. The cube map is an RGBA8 texture of six layers in the CPU's face order and table.
 
-use super::{BLUR_WGSL, Gpu, read_rgba8, warp_source};
+use super::blur::BlurPass;
+use super::pass::{draw, entry, fullscreen, output, texture, uniform};
+use super::{Gpu, read_rgba8, warp_source};
 use crate::cubemap::{CubeMap, Face};
 use crate::error::{Error, Result};
 use crate::normalmap::NormalMap;
@@ -122,96 +124,8 @@ impl CubeTexture {
 pub struct WarpPass {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
-    blur_pipeline: wgpu::RenderPipeline,
-    blur_layout: wgpu::BindGroupLayout,
+    blur: BlurPass,
     sampler: wgpu::Sampler,
-}
-
-fn entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty,
-        count: None,
-    }
-}
-
-fn uniform() -> wgpu::BindingType {
-    wgpu::BindingType::Buffer {
-        ty: wgpu::BufferBindingType::Uniform,
-        has_dynamic_offset: false,
-        min_binding_size: None,
-    }
-}
-
-fn texture(dim: wgpu::TextureViewDimension, filterable: bool) -> wgpu::BindingType {
-    wgpu::BindingType::Texture {
-        sample_type: wgpu::TextureSampleType::Float { filterable },
-        view_dimension: dim,
-        multisampled: false,
-    }
-}
-
-/// A full-screen pipeline writing RGBA8.
-fn fullscreen(gpu: &Gpu, source: &str, layout: &wgpu::BindGroupLayout) -> wgpu::RenderPipeline {
-    let module = gpu
-        .device
-        .create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: None,
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-    let pl = gpu
-        .device
-        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: None,
-            bind_group_layouts: &[Some(layout)],
-            immediate_size: 0,
-        });
-    gpu.device
-        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: None,
-            layout: Some(&pl),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::Rgba8Unorm,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        })
-}
-
-fn output(gpu: &Gpu, width: u32, height: u32) -> wgpu::Texture {
-    gpu.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("output"),
-        size: wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba8Unorm,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-            | wgpu::TextureUsages::COPY_SRC
-            | wgpu::TextureUsages::TEXTURE_BINDING,
-        view_formats: &[],
-    })
 }
 
 /// A float texture read with textureLoad (w × h, `channels` 1 or 4).
@@ -244,40 +158,6 @@ fn float_texture(gpu: &Gpu, w: u32, h: u32, data: &[f32], channels: u32) -> wgpu
         .create_view(&Default::default())
 }
 
-fn draw(
-    gpu: &Gpu,
-    pipeline: &wgpu::RenderPipeline,
-    bind: &wgpu::BindGroup,
-    target: &wgpu::Texture,
-) {
-    let view = target.create_view(&Default::default());
-    let mut enc = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    {
-        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("warp"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, bind, &[]);
-        pass.draw(0..3, 0..1);
-    }
-    gpu.queue.submit([enc.finish()]);
-}
-
 impl WarpPass {
     pub fn new(gpu: &Gpu) -> Self {
         use wgpu::TextureViewDimension as D;
@@ -297,19 +177,6 @@ impl WarpPass {
                     entry(5, texture(D::D2, false)),
                 ],
             });
-        let blur_layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("blur"),
-                entries: &[
-                    entry(0, uniform()),
-                    entry(1, texture(D::D2, true)),
-                    entry(
-                        2,
-                        wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    ),
-                ],
-            });
         let sampler = gpu.device.create_sampler(&wgpu::SamplerDescriptor {
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
@@ -318,8 +185,7 @@ impl WarpPass {
         WarpPass {
             pipeline: fullscreen(gpu, &warp_source(), &layout),
             layout,
-            blur_pipeline: fullscreen(gpu, BLUR_WGSL, &blur_layout),
-            blur_layout,
+            blur: BlurPass::new(gpu),
             sampler,
         }
     }
@@ -417,37 +283,12 @@ impl WarpPass {
         });
         let target = output(gpu, width, height);
         draw(gpu, &self.pipeline, &bind, &target);
-        let Some(b) = blur else {
-            return read_rgba8(gpu, &target, width, height);
-        };
-        let params = [
-            b.strength,
-            b.samples.max(1) as f32,
-            width as f32,
-            height as f32,
-        ];
-        let p_buf = buf(bytemuck::cast_slice(&params));
-        let src = target.create_view(&Default::default());
-        let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &self.blur_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: p_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&src),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-            ],
-        });
-        let blurred = output(gpu, width, height);
-        draw(gpu, &self.blur_pipeline, &bind, &blurred);
-        read_rgba8(gpu, &blurred, width, height)
+        match blur {
+            None => read_rgba8(gpu, &target, width, height),
+            Some(b) => {
+                let blurred = self.blur.apply(gpu, &target, (width, height), b);
+                read_rgba8(gpu, &blurred, width, height)
+            }
+        }
     }
 }

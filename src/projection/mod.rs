@@ -9,11 +9,13 @@
 
 mod cylindrical;
 mod cylindrical_vertical;
+pub mod doc;
 mod equirect;
 mod fisheye;
 mod perspective;
 pub mod view;
 
+pub use doc::ViewDoc;
 pub use view::{Orientation, View};
 
 use crate::error::{Error, Outside, Result, finite};

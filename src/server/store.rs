@@ -9,7 +9,6 @@
 use crate::image_io::atomic_write;
 use crate::rig::{Rig, RigDoc};
 use crate::tiles::TileScreen;
-use crate::tiles::build::Source;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -33,28 +32,13 @@ struct SavedRig {
     rig: RigDoc,
 }
 
-/// The content image a channel's 2d exports point into: a projection and view (as for
-/// `render`) and the image's size in pixels.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Canvas {
-    pub projection: String,
-    #[serde(default)]
-    pub params: crate::projection::Params,
-    #[serde(default = "crate::projection::view::default_look_to")]
-    pub look_to: [f64; 3],
-    #[serde(default = "crate::projection::view::default_look_up")]
-    pub look_up: [f64; 3],
-    #[serde(default)]
-    pub offaxis: [f64; 3],
-    #[serde(default = "one")]
-    pub zoom: f64,
-    /// Width and height, pixels.
-    pub size: [u32; 2],
-}
-
-fn one() -> f64 {
-    1.0
+crate::projection::doc::view_document! {
+    /// The content image a channel's 2d exports point into: a projection and view (as for
+    /// `render`) and the image's size in pixels.
+    pub struct Canvas {
+        /// Width and height, pixels.
+        pub size: [u32; 2],
+    }
 }
 
 impl Default for Canvas {
@@ -86,32 +70,9 @@ impl Canvas {
                 format!("must be 1–65535 pixels each way, got {w}×{h}"),
             ));
         }
-        Source {
-            projection: self.projection.clone(),
-            params: self.params,
-            aspect: f64::from(h) / f64::from(w),
-            look_to: self.look_to,
-            look_up: self.look_up,
-            offaxis: self.offaxis,
-            zoom: self.zoom,
-        }
-        .view()
-        .map_err(|e| {
-            let (name, reason) = match e {
-                crate::Error::Invalid { name, reason } => (name, reason),
-                other => ("".into(), other.to_string()),
-            };
-            let name = name.trim_start_matches('/');
-            let params = [
-                "hfov", "vfov", "fov", "tilt", "left", "right", "bottom", "top",
-            ];
-            let at = if params.contains(&name) {
-                format!("/params/{name}")
-            } else {
-                format!("/{name}")
-            };
-            crate::Error::invalid(at, reason)
-        })
+        self.doc()
+            .view(f64::from(h) / f64::from(w))
+            .map_err(crate::projection::doc::pointer)
     }
 }
 

@@ -5,53 +5,24 @@ use super::{Feature, Interpolation, TileScreen};
 use crate::error::{Error, Result};
 use crate::projection::{self, Orientation, Params, View};
 use glam::DVec3;
-use serde::{Deserialize, Serialize};
 
-/// A projection and view transform a tile screen was sampled from (kept so an edit can reset
-/// to it). Angles in degrees, vectors as [x, y, z].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Source {
-    pub projection: String,
-    #[serde(default)]
-    pub params: Params,
-    /// Output height / width the projection was built for.
-    pub aspect: f64,
-    #[serde(default = "crate::projection::view::default_look_to")]
-    pub look_to: [f64; 3],
-    #[serde(default = "crate::projection::view::default_look_up")]
-    pub look_up: [f64; 3],
-    #[serde(default)]
-    pub offaxis: [f64; 3],
-    #[serde(default = "one")]
-    pub zoom: f64,
-}
-
-fn one() -> f64 {
-    1.0
+crate::projection::doc::view_document! {
+    /// A projection and view transform a tile screen was sampled from (kept so an edit can
+    /// reset to it). Angles in degrees, vectors as [x, y, z].
+    pub struct Source {
+        /// Output height / width the projection was built for.
+        pub aspect: f64,
+    }
 }
 
 impl Source {
     /// The plain projection, looking ahead.
     pub fn new(projection: &str, params: Params, aspect: f64) -> Self {
-        Source {
-            projection: projection.into(),
-            params,
-            aspect,
-            look_to: crate::projection::view::default_look_to(),
-            look_up: crate::projection::view::default_look_up(),
-            offaxis: [0.0; 3],
-            zoom: 1.0,
-        }
+        Source::from_doc(projection::ViewDoc::new(projection, params), aspect)
     }
 
     pub fn view(&self) -> Result<View> {
-        let p = projection::build(&self.projection, &self.params, self.aspect)?;
-        let c = Orientation::look(
-            DVec3::from_array(self.look_to),
-            DVec3::from_array(self.look_up),
-        )?;
-        View::new(p, c, DVec3::from_array(self.offaxis), self.zoom)
+        self.doc().view(self.aspect)
     }
 }
 
