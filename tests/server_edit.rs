@@ -478,6 +478,18 @@ async fn channel_exports_parse_back_and_report_their_grid() {
             .all(|p| p.iter().all(|v| v.is_nan())
                 || p.iter().all(|v| v.is_finite()) && p != &[0.0; 3])
     );
+    // Most of the left projector lights the wall, the plane z = −3 in front of the eye.
+    let lit: Vec<_> = a3.iter().filter(|p| p[0].is_finite()).collect();
+    assert!(
+        lit.len() * 2 > a3.len(),
+        "{} of {} nodes lit",
+        lit.len(),
+        a3.len()
+    );
+    assert!(
+        lit.iter().all(|p| (p[2] + 3.0).abs() < 1e-3),
+        "a point off the wall"
+    );
 
     let (_, h, body) = call(&s, get("/v1/channels/left/exports/mesh.data")).await;
     let mesh = bourke::read_mesh(std::str::from_utf8(&body).unwrap()).unwrap();
