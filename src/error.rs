@@ -13,6 +13,10 @@ pub enum Error {
     /// A direction or screen position lies outside a projection's domain.
     #[error(transparent)]
     Outside(#[from] Outside),
+    /// The work was given up because whoever asked for it no longer wants it (a daemon client
+    /// went away).
+    #[error("cancelled")]
+    Cancelled,
     /// A file could not be read or written. `kind` is the operating system's reason where there
     /// was one, so callers can tell a missing file from a full disk or a closed pipe.
     #[error("{path}: {reason}")]

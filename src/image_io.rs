@@ -356,3 +356,37 @@ pub fn png_bytes(img: &Raster<[u8; 4]>) -> Result<Vec<u8>> {
     .map_err(|e| Error::invalid("png", e.to_string()))?;
     Ok(out)
 }
+
+/// Creates `dir` (and its parents) if missing; a new directory's entry is made durable by
+/// syncing its parent, so the first file written into it cannot vanish with it on power loss.
+pub fn create_dir_durably(dir: &Path) -> Result<()> {
+    if dir.is_dir() {
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e))?;
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    take_step(
+        dir,
+        Step::SyncDir {
+            dir: parent.to_path_buf(),
+        },
+        || std::fs::File::open(parent)?.sync_all(),
+    )
+}
+
+/// Removes the temporary files [`atomic_write`] leaves when the process is killed between
+/// creating and renaming one; returns how many there were.
+pub fn remove_leftovers(dir: &Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".omniwarp-"))
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .filter(|e| std::fs::remove_file(e.path()).is_ok())
+        .count()
+}

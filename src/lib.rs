@@ -13,6 +13,7 @@ pub mod export;
 pub mod gpu;
 pub mod image_io;
 pub mod lens;
+pub mod limits;
 pub mod normalmap;
 pub mod projection;
 pub mod raster;

@@ -24,6 +24,7 @@ use crate::error::{Error, Result};
 use crate::lens::{Lens, LensModel};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::AtomicBool;
 
 /// One measurement: projector pixel (pixel centres at integers) and the wall point it lights.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -74,6 +75,11 @@ impl CorrespondencesDoc {
                 ),
             ));
         }
+        crate::limits::at_most(
+            "/points",
+            self.points.len(),
+            crate::limits::CALIBRATION_POINTS,
+        )?;
         let lens = match &self.lens {
             Some(l) => {
                 let m: LensModel = l
@@ -212,6 +218,15 @@ pub fn coplanar(points: &[DVec3]) -> bool {
 
 /// Calibrates a projector from correspondences.
 pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> {
+    calibrate_unless(problem, choice, &AtomicBool::new(false))
+}
+
+/// [`calibrate`], given up with [`Error::Cancelled`] soon after `cancel` is set.
+pub fn calibrate_unless(
+    problem: &Problem,
+    choice: ModelChoice,
+    cancel: &AtomicBool,
+) -> Result<Calibration> {
     problem.check()?;
     let world: Vec<DVec3> = problem
         .points
@@ -253,11 +268,11 @@ pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> 
             });
             break;
         }
-        let full = fit(problem, model, &problem.points)?;
+        let full = fit(problem, model, &problem.points, cancel)?;
         let compared = choice == ModelChoice::Auto && !problem.intrinsics_fixed;
         // Without a comparison there is nothing to hold points out for; the plain fit decides.
         let held_out = if compared {
-            cross_validate(problem, model)?
+            cross_validate(problem, model, cancel)?
         } else {
             full.rms
         };
@@ -304,7 +319,7 @@ pub fn calibrate(problem: &Problem, choice: ModelChoice) -> Result<Calibration> 
 }
 
 /// RMS of each fold's points under a fit to the other four folds.
-fn cross_validate(problem: &Problem, model: LensModel) -> Result<f64> {
+fn cross_validate(problem: &Problem, model: LensModel, cancel: &AtomicBool) -> Result<f64> {
     let folds = 5;
     let (mut sum, mut n) = (0.0, 0usize);
     for f in 0..folds {
@@ -322,7 +337,7 @@ fn cross_validate(problem: &Problem, model: LensModel) -> Result<f64> {
             .filter(|(i, _)| i % folds == f)
             .map(|(_, c)| *c)
             .collect();
-        let fitted = fit(problem, model, &train)?;
+        let fitted = fit(problem, model, &train, cancel)?;
         for c in &test {
             match fitted.reproject(DVec3::from_array(c.world)) {
                 Some(q) => sum += (q[0] - c.pixel[0]).powi(2) + (q[1] - c.pixel[1]).powi(2),

@@ -7,6 +7,7 @@ use crate::lens::{Lens, LensModel, Real};
 use glam::{DMat3, DQuat, DVec3};
 use nalgebra::{DMatrix, DVector};
 use num_dual::DualSVec64;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Lanes for the Jacobian: up to 18 intrinsics and 6 pose parameters.
 const LANES: usize = 24;
@@ -169,7 +170,14 @@ impl Setup<'_> {
 }
 
 /// Fits `model` to `points` (all of the problem's, or a cross-validation fold).
-pub fn fit(problem: &Problem, model: LensModel, points: &[Correspondence]) -> Result<Fit> {
+/// Fits `model` to `points`; gives up with [`Error::Cancelled`] once `cancel` is set (checked
+/// every Levenberg–Marquardt iteration).
+pub fn fit(
+    problem: &Problem,
+    model: LensModel,
+    points: &[Correspondence],
+    cancel: &AtomicBool,
+) -> Result<Fit> {
     let world: Vec<DVec3> = points.iter().map(|c| DVec3::from_array(c.world)).collect();
     let pixels: Vec<[f64; 2]> = points.iter().map(|c| c.pixel).collect();
     // Start: the given lens if it is of this model, else a linear start.
@@ -220,7 +228,7 @@ pub fn fit(problem: &Problem, model: LensModel, points: &[Correspondence]) -> Re
     let rv = rvec_of(pose.r);
     let mut x: Vec<f64> = if free { intrinsics } else { Vec::new() };
     x.extend([rv.x, rv.y, rv.z, pose.t.x, pose.t.y, pose.t.z]);
-    let x = levenberg_marquardt(&setup, x)?;
+    let x = levenberg_marquardt(&setup, x, cancel)?;
     finish(&setup, &x)
 }
 
@@ -251,7 +259,7 @@ fn weights(r: &DVector<f64>) -> (Vec<f64>, f64) {
     )
 }
 
-fn levenberg_marquardt(setup: &Setup, mut x: Vec<f64>) -> Result<Vec<f64>> {
+fn levenberg_marquardt(setup: &Setup, mut x: Vec<f64>, cancel: &AtomicBool) -> Result<Vec<f64>> {
     let n = x.len();
     let cost = |r: &DVector<f64>, w: &[f64]| {
         (0..w.len())
@@ -260,6 +268,9 @@ fn levenberg_marquardt(setup: &Setup, mut x: Vec<f64>) -> Result<Vec<f64>> {
     };
     let mut lambda = 1e-3;
     for _ in 0..200 {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(Error::Cancelled);
+        }
         let (r, j) = setup.residuals(&x, true);
         let j = j.expect("asked for");
         let (w, _) = weights(&r);

@@ -54,6 +54,8 @@ pub struct ExportArgs {
 
 pub fn run(a: ExportArgs) -> Result<()> {
     use omniwarp::export::{self, channel::Sources, channel::Tolerance, mpcdi};
+    // The command line waits for its export; nothing cancels it.
+    let never = std::sync::atomic::AtomicBool::new(false);
     let rig = read_rig(&a.rig)?;
     let size = || {
         a.content_size
@@ -98,6 +100,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 points: &warp.points,
                 eye: rig.eye,
                 weights: &weights,
+                cancel: &never,
             };
             let (region, err) = src.region(profile, tol)?;
             eprintln!(
@@ -148,6 +151,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 points: &warp.points,
                 eye: rig.eye,
                 weights: &weights,
+                cancel: &never,
             };
             let tol = tolerance(0.5)?;
             if let ExportFormat::Mesh = a.format {
@@ -158,7 +162,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 );
                 write(text.as_bytes())?;
             } else {
-                let (c, rows) = src.grid_2d(tol);
+                let (c, rows) = src.grid_2d(tol)?;
                 eprintln!(
                     "{}×{} grid, worst error {:.4} px",
                     c.grid.columns, c.grid.rows, c.max_error

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::rig::RigDoc;
-use omniwarp::server::{AppState, Store, launch};
+use omniwarp::server::{AppState, OpenOptions, Options, Store, launch};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
@@ -22,6 +22,47 @@ pub struct ServeArgs {
     /// File holding the bearer token every request must carry (Authorization: Bearer …).
     #[arg(long)]
     token_file: Option<PathBuf>,
+    /// Bytes the warps of all channels may hold at once; a rig needing more is refused
+    /// (e.g. 2GiB, 512MiB, or a number of bytes).
+    #[arg(long, default_value = "2GiB", value_parser = parse_bytes)]
+    memory_budget: u64,
+    /// A host name clients may reach the daemon by, besides localhost, loopback addresses and
+    /// the bound address (checked against the Host header; repeat for more).
+    #[arg(long = "allow-host", value_name = "NAME")]
+    allow_hosts: Vec<String>,
+    /// An origin (scheme://host[:port]) whose web pages may call the daemon, e.g. a console
+    /// served elsewhere (repeat for more).
+    #[arg(long = "allow-origin", value_name = "ORIGIN")]
+    allow_origins: Vec<String>,
+    /// A directory mesh screens may be read from, besides the data directory's meshes/.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// When rig.json or a channel file and its .prev are both damaged, set them aside and start
+    /// again (from --demo for the rig) instead of refusing to start.
+    #[arg(long)]
+    reset: bool,
+}
+
+/// `2GiB`, `512MiB`, `64KiB` or a plain number of bytes.
+fn parse_bytes(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let (digits, unit) = s
+        .find(|c: char| !c.is_ascii_digit())
+        .map_or((s, ""), |i| s.split_at(i));
+    let shift = match unit.trim() {
+        "" | "B" => 0,
+        "KiB" => 10,
+        "MiB" => 20,
+        "GiB" => 30,
+        "TiB" => 40,
+        other => return Err(format!("unknown unit `{other}`; use KiB, MiB, GiB or TiB")),
+    };
+    let n: u64 = digits
+        .parse()
+        .map_err(|_| format!("`{s}` is not a size such as 2GiB"))?;
+    n.checked_mul(1 << shift)
+        .filter(|&b| b > 0)
+        .ok_or_else(|| format!("`{s}` must be positive and below 16 EiB"))
 }
 
 pub fn run(a: ServeArgs) -> Result<()> {
@@ -60,8 +101,26 @@ pub fn run(a: ServeArgs) -> Result<()> {
     } else {
         None
     };
-    let store = Store::open(a.data.clone(), initial).map_err(|e| anyhow::anyhow!("--data: {e}"))?;
-    let state = AppState::new(store, token);
+    let store = Store::open_with(
+        a.data.clone(),
+        OpenOptions {
+            initial,
+            reset: a.reset,
+            memory_budget: a.memory_budget,
+            assets: a.assets.clone(),
+        },
+    )
+    .map_err(|e| anyhow::anyhow!("--data: {e}"))?;
+    let state = AppState::with_options(
+        store,
+        Options {
+            token,
+            memory_budget: a.memory_budget,
+            allow_hosts: a.allow_hosts,
+            allow_origins: a.allow_origins,
+            assets: a.assets,
+        },
+    );
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;

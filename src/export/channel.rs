@@ -8,6 +8,7 @@ use super::mpcdi::{self, Profile, Region};
 use crate::error::{Error, Result};
 use crate::rig::{BlendOptions, blend_png_bytes};
 use glam::DVec3;
+use std::sync::atomic::AtomicBool;
 
 /// What a channel's exports are made from.
 pub struct Sources<'a> {
@@ -24,6 +25,8 @@ pub struct Sources<'a> {
     pub eye: DVec3,
     /// Linear blend weights per pixel.
     pub weights: &'a [f32],
+    /// Set when the export is no longer wanted: grid searches stop with [`Error::Cancelled`].
+    pub cancel: &'a AtomicBool,
 }
 
 /// Tolerances: content pixels for 2d fields and meshes, millimetres on the wall for a3.
@@ -40,6 +43,26 @@ impl Tolerance {
                 format!("must be a positive number, got {v}"),
             ))
         }
+    }
+
+    /// The grid when it meets the tolerance; otherwise an error naming `field` that says what
+    /// the finest allowed grid reached, so no export silently misses its promise.
+    pub fn met<const N: usize>(self, c: Chosen<N>, field: &str) -> Result<Chosen<N>> {
+        if c.max_error <= self.0 {
+            return Ok(c);
+        }
+        Err(Error::invalid(
+            field,
+            format!(
+                "cannot be met: the finest grid allowed ({}×{} nodes, limit {}) reaches {:.4}, \
+                 above {}",
+                c.grid.columns,
+                c.grid.rows,
+                crate::limits::EXPORT_NODES,
+                c.max_error,
+                self.0
+            ),
+        ))
     }
 }
 
@@ -60,8 +83,8 @@ impl Sources<'_> {
 
     /// Content (x, y) grid of the 2d meaning: B = NaN (no error estimate), NaN where unknown;
     /// samples past the canvas edge keep their (outside [0, 1]) coordinates, alpha hides them.
-    pub fn grid_2d(&self, tol: Tolerance) -> (Chosen<2>, Vec<[f32; 3]>) {
-        let c = grid::choose(self.uv, self.width, self.height, tol.0, self.uv_scale());
+    pub fn grid_2d(&self, tol: Tolerance) -> Result<(Chosen<2>, Vec<[f32; 3]>)> {
+        let c = self.choose_2d(tol)?;
         let rows = c
             .grid
             .samples
@@ -71,18 +94,32 @@ impl Sources<'_> {
                 None => [f32::NAN; 3],
             })
             .collect();
-        (c, rows)
+        Ok((c, rows))
+    }
+
+    fn choose_2d(&self, tol: Tolerance) -> Result<Chosen<2>> {
+        let c = grid::choose(
+            self.uv,
+            self.width,
+            self.height,
+            tol.0,
+            self.uv_scale(),
+            self.cancel,
+        )?;
+        tol.met(c, "tolerance")
     }
 
     /// Wall X, Y, Z grid of the a3 meaning, metres from the eye, NaN where unknown.
-    pub fn grid_a3(&self, tol: Tolerance) -> (Chosen<3>, Vec<[f32; 3]>) {
+    pub fn grid_a3(&self, tol: Tolerance) -> Result<(Chosen<3>, Vec<[f32; 3]>)> {
         let c = grid::choose(
             &self.a3_field(),
             self.width,
             self.height,
             tol.0,
             [1000.0; 3],
-        );
+            self.cancel,
+        )?;
+        let c = tol.met(c, "tolerance")?;
         let rows = c
             .grid
             .samples
@@ -92,7 +129,7 @@ impl Sources<'_> {
                 None => [f32::NAN; 3],
             })
             .collect();
-        (c, rows)
+        Ok((c, rows))
     }
 
     /// Alpha (blend weights), zero wherever the profile's field has no value, so players that
@@ -121,11 +158,11 @@ impl Sources<'_> {
     pub fn region(&self, profile: Profile, tol: Tolerance) -> Result<(Region, f64)> {
         let (columns, rows, samples, err) = match profile {
             Profile::TwoD => {
-                let (c, s) = self.grid_2d(tol);
+                let (c, s) = self.grid_2d(tol)?;
                 (c.grid.columns, c.grid.rows, s, c.max_error)
             }
             Profile::A3 => {
-                let (c, s) = self.grid_a3(tol);
+                let (c, s) = self.grid_a3(tol)?;
                 (c.grid.columns, c.grid.rows, s, c.max_error)
             }
         };
@@ -142,7 +179,7 @@ impl Sources<'_> {
 
     /// Paul Bourke mesh text with its grid, intensity = blend weight.
     pub fn bourke(&self, tol: Tolerance) -> Result<(String, Chosen<2>)> {
-        let c = grid::choose(self.uv, self.width, self.height, tol.0, self.uv_scale());
+        let c = self.choose_2d(tol)?;
         let weights: Vec<Option<[f64; 1]>> =
             self.weights.iter().map(|w| Some([f64::from(*w)])).collect();
         let wgrid = grid::sample(

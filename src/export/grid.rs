@@ -10,6 +10,7 @@
 //! count them, so sample 0 sits at −½.
 
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A uniform grid of samples, row-major from the top row; `None` where the field has none.
 #[derive(Debug, Clone, PartialEq)]
@@ -219,27 +220,49 @@ pub struct Chosen<const N: usize> {
 
 /// The coarsest grid (columns growing by about √2 per step, rows keeping the image's aspect)
 /// whose worst interpolation error is within `tolerance`; one sample per pixel corner when none
-/// is.
+/// is. Grids stop at [`crate::limits::EXPORT_NODES`]: the finest grid tried is returned, and
+/// the caller compares its `max_error` with the tolerance. [`Error::Cancelled`] once `cancel`
+/// is set.
+///
+/// [`Error::Cancelled`]: crate::Error::Cancelled
 pub fn choose<const N: usize>(
     field: &[Option<[f64; N]>],
     width: usize,
     height: usize,
     tolerance: f64,
     scale: [f64; N],
-) -> Chosen<N> {
-    let mut columns = 2usize;
-    while columns < width {
-        let rows = ((columns as f64 * height as f64 / width as f64).round() as usize).max(2);
+    cancel: &AtomicBool,
+) -> crate::Result<Chosen<N>> {
+    let fits = |c: usize, r: usize| {
+        c.checked_mul(r)
+            .is_some_and(|n| n <= crate::limits::EXPORT_NODES)
+    };
+    let try_grid = |columns: usize, rows: usize| {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(crate::Error::Cancelled);
+        }
         let grid = sample(field, width, height, columns, rows);
         let max_error = grid.max_error(field, width, height, scale);
-        if max_error <= tolerance {
-            return Chosen { grid, max_error };
+        Ok(Chosen { grid, max_error })
+    };
+    let mut columns = 2usize;
+    let mut finest: Option<Chosen<N>> = None;
+    while columns < width {
+        let rows = ((columns as f64 * height as f64 / width as f64).round() as usize).max(2);
+        if !fits(columns, rows) {
+            break;
         }
+        let c = try_grid(columns, rows)?;
+        if c.max_error <= tolerance {
+            return Ok(c);
+        }
+        finest = Some(c);
         columns = ((columns as f64 * std::f64::consts::SQRT_2).ceil() as usize).max(columns + 1);
     }
-    let grid = sample(field, width, height, width + 1, height + 1);
-    let max_error = grid.max_error(field, width, height, scale);
-    Chosen { grid, max_error }
+    match finest {
+        Some(c) if !fits(width + 1, height + 1) => Ok(c),
+        _ => try_grid(width + 1, height + 1),
+    }
 }
 
 #[cfg(test)]
@@ -287,7 +310,7 @@ mod tests {
         let f = field(w, h);
         let mut columns = Vec::new();
         for tol in [0.05, 0.2, 1.0] {
-            let c = choose(&f, w, h, tol, [1.0, 1.0]);
+            let c = choose(&f, w, h, tol, [1.0, 1.0], &AtomicBool::new(false)).unwrap();
             assert!(c.max_error <= tol, "{tol}: {}", c.max_error);
             let mut worst = 0.0f64;
             for j in 0..h {

@@ -154,6 +154,15 @@ impl FromStr for LensModel {
                 if nx < 2 || ny < 2 {
                     return Err(bad(format!("needs at least 2×2 knots, got {nx}×{ny}")));
                 }
+                let (side, all) = (
+                    crate::limits::SPLINE_KNOTS_SIDE,
+                    crate::limits::SPLINE_KNOTS,
+                );
+                if nx > side || ny > side || u64::from(nx) * u64::from(ny) > all {
+                    return Err(bad(format!(
+                        "{nx}×{ny} knots are above the limit of {side} each way and {all} in all"
+                    )));
+                }
                 if fov_x_deg == 0 || fov_x_deg >= 360 {
                     return Err(bad(format!(
                         "fov_x_deg must lie in 1..359, got {fov_x_deg}"

@@ -62,7 +62,12 @@ pub fn pointer(e: Error) -> Error {
         Error::Invalid { name, reason } => (name, reason),
         other => (String::new(), other.to_string()),
     };
-    let name = name.trim_start_matches('/');
+    // The library names the view's vectors as the command line spells them.
+    let name = match name.trim_start_matches('/') {
+        "look-to" => "look_to",
+        "look-up" => "look_up",
+        other => other,
+    };
     let params = [
         "hfov", "vfov", "fov", "tilt", "left", "right", "bottom", "top",
     ];

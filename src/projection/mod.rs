@@ -178,11 +178,14 @@ pub(crate) fn fov(name: &str, deg: f64, max_deg: f64, max_open: bool) -> Result<
     } else {
         deg > max_deg
     };
-    if deg <= 0.0 || too_big {
+    // Below the smallest field of view a content pixel is so small that later steps (grids
+    // sized from pixel tolerances) would overflow; see crate::limits.
+    let min = crate::limits::MIN_FOV_DEG;
+    if deg < min || too_big {
         let bound = if max_open { "below" } else { "at most" };
         return Err(Error::invalid(
             name,
-            format!("must be above 0 and {bound} {max_deg} degrees, got {deg}"),
+            format!("must be above 0 (at least {min}) and {bound} {max_deg} degrees, got {deg}"),
         ));
     }
     Ok(deg.to_radians())

@@ -112,10 +112,11 @@ impl View {
             ));
         }
         let zoom = finite("zoom", zoom)?;
-        if zoom <= 0.0 {
+        let (lo, hi) = crate::limits::ZOOM;
+        if !(lo..=hi).contains(&zoom) {
             return Err(Error::invalid(
                 "zoom",
-                format!("must be positive, got {zoom}"),
+                format!("must be positive, between {lo} and {hi}, got {zoom}"),
             ));
         }
         Ok(View {

@@ -38,6 +38,21 @@ pub struct RigDoc {
     pub channels: Vec<ChannelDoc>,
 }
 
+impl RigDoc {
+    /// The document alone, unvalidated and with any mesh not loaded; errors name the field by
+    /// JSON pointer, and text after the document is refused.
+    pub fn parse(text: &str) -> Result<RigDoc> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let doc: RigDoc = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let pointer = pointer_of(&e.path().to_string());
+            Error::invalid(pointer, e.into_inner().to_string())
+        })?;
+        de.end()
+            .map_err(|e| Error::invalid("/", format!("text after the rig document: {e}")))?;
+        Ok(doc)
+    }
+}
+
 /// How content directions relate to the world: V = C·d − O, normalised, where d is the unit
 /// direction from the eye to the wall point and C is built from look-to/look-up as in the
 /// projection view transform.
@@ -130,11 +145,7 @@ fn vec3(field: &str, v: [f64; 3]) -> Result<DVec3> {
 impl Rig {
     /// Parses and validates a rig; `base` is where relative paths (mesh screens) start.
     pub fn from_json(text: &str, base: &Path) -> Result<Rig> {
-        let de = &mut serde_json::Deserializer::from_str(text);
-        let mut doc: RigDoc = serde_path_to_error::deserialize(de).map_err(|e| {
-            let pointer = pointer_of(&e.path().to_string());
-            Error::invalid(pointer, e.into_inner().to_string())
-        })?;
+        let mut doc = RigDoc::parse(text)?;
         doc.screen.load(base, "/screen")?;
         Rig::from_doc(doc)
     }
@@ -172,6 +183,7 @@ impl Rig {
                 "a rig needs at least one channel",
             ));
         }
+        crate::limits::at_most("/channels", doc.channels.len(), crate::limits::CHANNELS)?;
         let mut channels = Vec::with_capacity(doc.channels.len());
         for (n, c) in doc.channels.iter().enumerate() {
             let at = |f: &str| format!("/channels/{n}/{f}");
@@ -194,10 +206,11 @@ impl Rig {
                 ));
             }
             let [w, h] = c.resolution;
-            if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+            let side = crate::limits::CHANNEL_SIDE;
+            if !(1..=side).contains(&w) || !(1..=side).contains(&h) {
                 return Err(Error::invalid(
                     at("resolution"),
-                    format!("must be between 1 and 16384 pixels each way, got {w}×{h}"),
+                    format!("must be between 1 and {side} pixels each way, got {w}×{h}"),
                 ));
             }
             let model: LensModel = c
@@ -247,6 +260,41 @@ impl Rig {
             offaxis,
             channels,
         })
+    }
+
+    /// What the warps of all channels hold in memory at once, bytes (see
+    /// [`crate::limits::WARP_BYTES_PER_PIXEL`]).
+    pub fn warp_bytes(&self) -> u64 {
+        self.channels
+            .iter()
+            .map(|c| u64::from(c.width) * u64::from(c.height))
+            .sum::<u64>()
+            * crate::limits::WARP_BYTES_PER_PIXEL
+    }
+
+    /// Refuses a rig whose warps would not fit in `budget` bytes, naming the largest channel.
+    pub fn check_budget(&self, budget: u64) -> Result<()> {
+        let need = self.warp_bytes();
+        if need <= budget {
+            return Ok(());
+        }
+        let (n, c) = self
+            .channels
+            .iter()
+            .enumerate()
+            .max_by_key(|(_, c)| u64::from(c.width) * u64::from(c.height))
+            .expect("a rig has channels");
+        Err(Error::invalid(
+            format!("/channels/{n}/resolution"),
+            format!(
+                "the warps of all channels need {} MiB ({}×{} is the largest), above the memory \
+                 budget of {} MiB",
+                need >> 20,
+                c.width,
+                c.height,
+                budget >> 20
+            ),
+        ))
     }
 
     pub fn channel(&self, id: &str) -> Result<&Channel> {

@@ -7,7 +7,7 @@ use super::jobs::run_job;
 use super::rig::commit_rig;
 use super::state::{AppState, if_match, parse_body, tagged};
 use super::store::Proposal;
-use crate::calibration::{CorrespondencesDoc, calibrate};
+use crate::calibration::{CorrespondencesDoc, calibrate_unless};
 use crate::rig::Rig;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
@@ -27,16 +27,16 @@ pub async fn propose(
         .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?;
     let (problem, choice) = b.problem([ch.width, ch.height], None)?;
     let resolution = [ch.width, ch.height];
-    let cal = run_job(&s, move |_| {
-        Some(calibrate(&problem, choice).map_err(|e| match e {
+    let cal = run_job(&s, move |cancel| {
+        calibrate_unless(&problem, choice, cancel).map_err(|e| match e {
             crate::Error::Invalid { name, reason } => ApiError::Invalid {
                 field: crate::rig::pointer_of(&name),
                 reason,
             },
-            other => ApiError::Internal(other.to_string()),
-        }))
+            other => other.into(),
+        })
     })
-    .await??;
+    .await?;
     let pid = s
         .store
         .next_proposal
@@ -62,11 +62,9 @@ pub async fn propose(
     tokio::task::spawn_blocking(move || state.store.save_proposal(&copy))
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))??;
-    s.store
-        .proposals
-        .lock()
-        .expect("proposal lock")
-        .insert(pid, Arc::new(proposal.clone()));
+    for old in s.store.keep_proposal(proposal.clone()) {
+        s.announce(serde_json::json!({"kind": "proposal_dropped", "id": old}));
+    }
     s.announce(serde_json::json!({"kind": "proposal", "channel": id, "id": pid}));
     Ok((
         StatusCode::CREATED,
@@ -85,11 +83,17 @@ fn find(s: &AppState, pid: u64) -> Result<Arc<Proposal>, ApiError> {
         .ok_or_else(|| ApiError::NotFound(format!("no proposal {pid}")))
 }
 
+/// A proposal id from the path; anything but a number names no proposal.
+fn proposal_id(pid: &str) -> Result<u64, ApiError> {
+    pid.parse()
+        .map_err(|_| ApiError::NotFound(format!("no proposal `{pid}`: ids are numbers")))
+}
+
 pub async fn get_proposal(
     State(s): State<Arc<AppState>>,
-    Path(pid): Path<u64>,
+    Path(pid): Path<String>,
 ) -> Result<Response, ApiError> {
-    let p = find(&s, pid)?;
+    let p = find(&s, proposal_id(&pid)?)?;
     Ok(axum::Json(serde_json::to_value(&*p).expect("proposals serialise")).into_response())
 }
 
@@ -97,11 +101,11 @@ pub async fn get_proposal(
 /// revision.
 pub async fn apply_proposal(
     State(s): State<Arc<AppState>>,
-    Path(pid): Path<u64>,
+    Path(pid): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let wanted = if_match(&headers)?;
-    let p = find(&s, pid)?;
+    let p = find(&s, proposal_id(&pid)?)?;
     let (rig, _) = s.store.snapshot();
     let mut doc = rig.doc.clone();
     let slot = doc
@@ -113,6 +117,7 @@ pub async fn apply_proposal(
         })?;
     *slot = p.proposed.clone();
     let next = Rig::from_doc(doc)?;
+    next.check_budget(s.options.memory_budget)?;
     let revision = commit_rig(&s, wanted, next).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }

@@ -2,6 +2,7 @@
 //! revision (`ETag`, `If-Match`, 412 with the current one when stale).
 
 use super::ApiError;
+use super::jobs::run_write;
 use super::state::{AppState, if_match, parse_body, tagged};
 use super::store::{Canvas, ChannelData, Versioned};
 use crate::rig::{Channel, Rig};
@@ -73,12 +74,6 @@ async fn commit(
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))??;
     *held = next;
-    if kind == "tiles" {
-        s.computed
-            .lock()
-            .expect("cache lock")
-            .retain(|k, _| !(k.0 == id && k.2 != revision));
-    }
     s.announce(serde_json::json!({"kind": kind, "channel": id, "revision": revision}));
     Ok(())
 }
@@ -150,7 +145,13 @@ pub async fn put_tiles(
 ) -> Result<Response, ApiError> {
     let wanted = if_match(&headers)?;
     let screen: TileScreen = parse_body(&body)?;
-    screen.validate()?;
+    screen.validate().map_err(|e| match e {
+        crate::Error::Invalid { name, reason } => ApiError::Invalid {
+            field: screen_pointer(&name),
+            reason,
+        },
+        other => other.into(),
+    })?;
     replace_tiles(&s, &id, wanted, Some(screen)).await
 }
 
@@ -202,41 +203,28 @@ pub async fn patch_tiles(
 ) -> Result<Response, ApiError> {
     let wanted = if_match(&headers)?;
     let patch: Patch = parse_body(&body)?;
-    if patch.edits.is_empty() || patch.edits.len() > 1000 {
+    let limit = crate::limits::EDITS_PER_PATCH;
+    if patch.edits.is_empty() || patch.edits.len() > limit {
         return Err(ApiError::Invalid {
             field: "/edits".into(),
-            reason: "must hold 1 to 1000 edits".into(),
+            reason: format!(
+                "must hold 1 to {limit} edits (the limit), got {}",
+                patch.edits.len()
+            ),
         });
     }
     let d = data(&s, &id).await?;
     let mut g = d.lock().await;
     fresh(g.tiles.revision, wanted)?;
     let (rig, _) = s.store.snapshot();
-    let ch = rig.channel(&id).map_err(|_| not_found(&id))?;
-    let mut screen = match &g.tiles.value {
-        Some(t) => t.clone(),
-        None => sample_geometry(&rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
-    };
-    for (n, e) in patch.edits.into_iter().enumerate() {
-        let named = |err: crate::Error| match err {
-            crate::Error::Invalid { name, reason } => ApiError::Invalid {
-                field: format!("/edits/{n}/{name}"),
-                reason,
-            },
-            other => ApiError::Internal(other.to_string()),
-        };
-        // `reset` resamples the geometry: a screen sampled from it keeps no other source.
-        screen = match e {
-            Edit::Reset => {
-                let (c, r) = match &screen.layout {
-                    crate::tiles::Layout::Grid { columns, rows, .. } => (*columns, *rows),
-                    crate::tiles::Layout::Soup { .. } => (SAMPLED_COLUMNS, sampled_rows(ch)),
-                };
-                sample_geometry(&rig, ch, c, r).map_err(named)?
-            }
-            other => screen.edit(&other).map_err(named)?,
-        };
-    }
+    let start = g.tiles.value.clone();
+    // Edits resample and validate whole grids: in the pool, not on the runtime, and given up
+    // when the client goes away. The channel stays locked meanwhile, so edits stay in order.
+    let (id2, edits) = (id.clone(), patch.edits);
+    let mut screen = run_write(&s, move |cancel| {
+        apply_edits(&rig, &id2, start, edits, cancel)
+    })
+    .await?;
     let revision = wanted + 1;
     screen.revision = revision;
     let mut next = g.clone();
@@ -246,4 +234,68 @@ pub async fn patch_tiles(
     };
     commit(&s, &id, &mut g, next, "tiles", revision).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}
+
+/// The screen after `edits`, all or none; errors name the edit (`/edits/N/field`).
+fn apply_edits(
+    rig: &Rig,
+    id: &str,
+    start: Option<TileScreen>,
+    edits: Vec<Edit>,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<TileScreen, ApiError> {
+    let ch = rig.channel(id).map_err(|_| not_found(id))?;
+    let mut screen = match start {
+        Some(t) => t,
+        None => sample_geometry(rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
+    };
+    for (n, e) in edits.into_iter().enumerate() {
+        if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(crate::Error::Cancelled.into());
+        }
+        let named = |err: crate::Error| match err {
+            crate::Error::Invalid { name, reason } => ApiError::Invalid {
+                field: format!("/edits/{n}/{}", edit_field(&name)),
+                reason,
+            },
+            other => other.into(),
+        };
+        // `reset` resamples the geometry: a screen sampled from it keeps no other source.
+        screen = match e {
+            Edit::Reset => {
+                let (c, r) = match &screen.layout {
+                    crate::tiles::Layout::Grid { columns, rows, .. } => (*columns, *rows),
+                    crate::tiles::Layout::Soup { .. } => (SAMPLED_COLUMNS, sampled_rows(ch)),
+                };
+                sample_geometry(rig, ch, c, r).map_err(named)?
+            }
+            other => screen.edit(&other).map_err(named)?,
+        };
+    }
+    Ok(screen)
+}
+
+/// A tile screen error's name (`features[102] (column 3, row 3).scale`, `grid`) as the JSON
+/// pointer into the screen's document (`/layout/features/102/scale`, `/layout`).
+fn screen_pointer(name: &str) -> String {
+    let p = format!("/{}", edit_field(name));
+    let in_layout = ["/features", "/triangles", "/columns", "/rows"];
+    if p == "/grid" {
+        "/layout".into()
+    } else if in_layout.iter().any(|l| p.starts_with(l)) {
+        format!("/layout{p}")
+    } else {
+        p
+    }
+}
+
+/// A tile screen error's name as a JSON pointer below the edit: `features[102] (column 3, row
+/// 3).scale` names the screen's feature 102, which the edit made invalid.
+fn edit_field(name: &str) -> String {
+    let plain = name.split(" (").next().unwrap_or(name);
+    let tail = name.rsplit_once(").").map(|(_, t)| format!(".{t}"));
+    let path = format!("{plain}{}", tail.unwrap_or_default());
+    crate::rig::pointer_of(&path)
+        .trim_start_matches('/')
+        .to_string()
 }

@@ -90,6 +90,14 @@ impl Client {
         for (k, v) in headers {
             req += &format!("{k}: {v}\r\n");
         }
+        // The daemon takes JSON bodies only (a browser cannot send that cross-site without
+        // asking first); say so unless the caller named another type.
+        let typed = headers
+            .iter()
+            .any(|(k, _)| k.eq_ignore_ascii_case("content-type"));
+        if !body.is_empty() && !typed {
+            req += "Content-Type: application/json\r\n";
+        }
         req += "\r\n";
         let stream = conn.get_mut();
         stream.write_all(req.as_bytes())?;

@@ -20,8 +20,25 @@ pub enum ApiError {
     PreconditionRequired,
     /// 503: too many renders at once.
     Busy,
+    /// Any other refusal with its status (403, 405, 408, 409, 413, 414, 415, 422, 431, 503):
+    /// `field` names the header, parameter or body pointer at fault where there is one.
+    Refused {
+        status: StatusCode,
+        field: Option<String>,
+        reason: String,
+    },
     /// 500: logged, not detailed to the client.
     Internal(String),
+}
+
+impl ApiError {
+    pub fn refused(status: StatusCode, field: Option<&str>, reason: impl Into<String>) -> Self {
+        ApiError::Refused {
+            status,
+            field: field.map(String::from),
+            reason: reason.into(),
+        }
+    }
 }
 
 impl From<crate::Error> for ApiError {
@@ -31,6 +48,12 @@ impl From<crate::Error> for ApiError {
                 field: name,
                 reason,
             },
+            // Only a client that went away cancels, so nobody reads this answer.
+            crate::Error::Cancelled => ApiError::refused(
+                StatusCode::SERVICE_UNAVAILABLE,
+                None,
+                "the work was cancelled",
+            ),
             other => ApiError::Internal(other.to_string()),
         }
     }
@@ -60,6 +83,17 @@ impl IntoResponse for ApiError {
                 StatusCode::SERVICE_UNAVAILABLE,
                 json!({"error": "too many renders at once; retry shortly"}),
             ),
+            ApiError::Refused {
+                status,
+                field,
+                reason,
+            } => (
+                *status,
+                match field {
+                    Some(f) => json!({"error": reason, "field": f}),
+                    None => json!({"error": reason}),
+                },
+            ),
             ApiError::Internal(detail) => {
                 tracing::error!(%detail, "internal error");
                 (
@@ -74,7 +108,7 @@ impl IntoResponse for ApiError {
         {
             resp.headers_mut().insert(header::ETAG, v);
         }
-        if matches!(self, ApiError::Busy) {
+        if status == StatusCode::SERVICE_UNAVAILABLE {
             resp.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
         }

@@ -6,16 +6,18 @@
 use super::ApiError;
 use super::jobs::{Job, job, run_job};
 use super::outputs::file;
-use super::state::AppState;
+use super::state::{AppState, Query};
 use crate::export::channel::{Sources, Tolerance};
 use crate::export::mpcdi::{self, Profile, Version};
 use crate::export::{content_uv_unbounded, inside, pfm_bytes, remap_pgm_bytes, stmap};
 use crate::image_io::{Precision, exr_bytes};
-use axum::extract::{Path, Query, State};
+use axum::extract::{Path, State};
 use axum::http::HeaderValue;
+use axum::http::StatusCode;
 use axum::response::Response;
 use serde::Deserialize;
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -60,7 +62,7 @@ impl Owned {
         self.uv.iter().map(|p| p.filter(|&uv| inside(uv))).collect()
     }
 
-    fn sources(&self) -> Sources<'_> {
+    fn sources<'a>(&'a self, cancel: &'a AtomicBool) -> Sources<'a> {
         Sources {
             id: &self.id,
             width: self.width,
@@ -70,6 +72,7 @@ impl Owned {
             points: &self.job.computed.geometry.warp.points,
             eye: self.job.rig.eye,
             weights: &self.job.computed.geometry.weights,
+            cancel,
         }
     }
 }
@@ -117,8 +120,10 @@ pub async fn channel_export(
     let j = job(&s, &id).await?;
     let etag = j.etag();
     let id2 = id.clone();
-    let made = run_job(&s, move |_| Some(make(owned(j, &id2), &name, tol))).await??;
-    let resp = file(made.bytes, made.mime, &etag);
+    let made = run_job(&s, move |cancel| make(owned(j, &id2)?, &name, tol, cancel))
+        .await
+        .map_err(unmet)?;
+    let resp = file(&s, made.bytes, made.mime, &etag)?;
     Ok(match made.grid {
         Some((c, r, e)) => with_grid(resp, c, r, e),
         None => resp,
@@ -132,9 +137,19 @@ struct Made {
     grid: Option<(usize, usize, f64)>,
 }
 
-fn make(o: Result<Owned, ApiError>, name: &str, tol: Tolerance) -> Result<Made, ApiError> {
-    let o = o?;
-    let src = o.sources();
+/// The tolerance was checked when the request came in; a later error about it says the grid
+/// limit stopped the search short of it: 422, with what was reached.
+fn unmet(e: ApiError) -> ApiError {
+    match e {
+        ApiError::Invalid { field, reason } if field == "tolerance" => {
+            ApiError::refused(StatusCode::UNPROCESSABLE_ENTITY, Some(&field), reason)
+        }
+        other => other,
+    }
+}
+
+fn make(o: Owned, name: &str, tol: Tolerance, cancel: &AtomicBool) -> Result<Made, ApiError> {
+    let src = o.sources(cancel);
     let pfm = "image/x-portable-floatmap";
     Ok(match name {
         "stmap.exr" => {
@@ -150,7 +165,7 @@ fn make(o: Result<Owned, ApiError>, name: &str, tol: Tolerance) -> Result<Made, 
             }
         }
         "warp-2d.pfm" => {
-            let (c, rows) = src.grid_2d(tol);
+            let (c, rows) = src.grid_2d(tol)?;
             let (gw, gh) = (c.grid.columns, c.grid.rows);
             Made {
                 bytes: pfm_bytes(gw, gh, &rows)?,
@@ -159,7 +174,7 @@ fn make(o: Result<Owned, ApiError>, name: &str, tol: Tolerance) -> Result<Made, 
             }
         }
         "warp-a3.pfm" => {
-            let (c, rows) = src.grid_a3(tol);
+            let (c, rows) = src.grid_a3(tol)?;
             let (gw, gh) = (c.grid.columns, c.grid.rows);
             Made {
                 bytes: pfm_bytes(gw, gh, &rows)?,
@@ -238,28 +253,27 @@ pub async fn mpcdi_package(
     let etag = format!(
         "\"{}\"",
         jobs.iter()
-            .map(|(_, j)| format!("{}.{}", j.rig_revision, j.tiles_revision))
+            .map(|(_, j)| format!("{:016x}", j.key))
             .collect::<Vec<_>>()
             .join("-")
     );
-    let (bytes, worst) = run_job(&s, move |_| {
-        Some((|| -> Result<(Vec<u8>, f64), ApiError> {
-            let mut regions = Vec::new();
-            let mut worst = 0.0f64;
-            for (id, j) in jobs {
-                let o = owned(j, &id)?;
-                let (region, err) = o.sources().region(profile, tol)?;
-                worst = worst.max(err);
-                regions.push(region);
-            }
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs());
-            Ok((mpcdi::package(version, profile, &regions, now)?, worst))
-        })())
+    let (bytes, worst) = run_job(&s, move |cancel| {
+        let mut regions = Vec::new();
+        let mut worst = 0.0f64;
+        for (id, j) in jobs {
+            let o = owned(j, &id)?;
+            let (region, err) = o.sources(cancel).region(profile, tol)?;
+            worst = worst.max(err);
+            regions.push(region);
+        }
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        Ok((mpcdi::package(version, profile, &regions, now)?, worst))
     })
-    .await??;
-    let mut resp = file(bytes, "application/zip", &etag);
+    .await
+    .map_err(unmet)?;
+    let mut resp = file(&s, bytes, "application/zip", &etag)?;
     if let Ok(v) = HeaderValue::from_str(&format!("{worst:.6}")) {
         resp.headers_mut().insert("x-omniwarp-max-error", v);
     }

@@ -1,6 +1,6 @@
 //! Heavy work off the async runtime: a bounded pool of worker permits (503 + Retry-After beyond
 //! it), cancellation when the client goes away, and the channel's computed warp, cached in
-//! memory and kept on disk.
+//! memory and kept on disk by a hash of its inputs.
 
 use super::ApiError;
 use super::cache::{Computed, Geometry};
@@ -18,13 +18,37 @@ pub struct Job {
     pub tiles_revision: u64,
     pub canvas: Canvas,
     pub computed: Arc<Computed>,
+    /// A hash of everything the computed warp depends on (see [`keys`]).
+    pub key: u64,
 }
 
 impl Job {
-    /// `"<rig>.<tiles>"`: changes whenever the output can.
+    /// `"<hash>-<rig>.<tiles>"`: changes whenever the output can, also when a revision number
+    /// comes back after a fallback to a `.prev` file with other contents.
     pub fn etag(&self) -> String {
-        format!("\"{}.{}\"", self.rig_revision, self.tiles_revision)
+        etag(self.key, self.rig_revision, self.tiles_revision)
     }
+}
+
+pub fn etag(key: u64, rig_revision: u64, tiles_revision: u64) -> String {
+    format!("\"{key:016x}-{rig_revision}.{tiles_revision}\"")
+}
+
+/// Cache keys by content, not revision number: the geometry's from the rig document and the
+/// channel, the computed warp's from that and the tile screen. (Revision numbers can repeat
+/// after a damaged file falls back to its `.prev`; contents that differ cannot share a key.)
+pub fn keys(rig: &Rig, id: &str, tiles: &Option<crate::tiles::TileScreen>) -> (u64, u64) {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    id.hash(&mut h);
+    serde_json::to_vec(&rig.doc)
+        .expect("rigs serialise")
+        .hash(&mut h);
+    let geometry = h.finish();
+    serde_json::to_vec(tiles)
+        .expect("tile screens serialise")
+        .hash(&mut h);
+    (geometry, h.finish())
 }
 
 /// Sets the flag when dropped: a handler future dropped because its client went away stops
@@ -37,32 +61,66 @@ impl Drop for CancelOnDrop {
     }
 }
 
-/// Runs `work` on the blocking pool under a worker permit; `None` from `work` means cancelled.
+/// Runs `work` on the blocking pool under a worker permit (503 when none is free). `work` sees
+/// a flag that is set when the client goes away and should return [`crate::Error::Cancelled`]
+/// soon after.
 pub async fn run_job<T: Send + 'static>(
     s: &Arc<AppState>,
-    work: impl FnOnce(&AtomicBool) -> Option<T> + Send + 'static,
+    work: impl FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
 ) -> Result<T, ApiError> {
-    let _permit = s.workers.try_acquire().map_err(|_| ApiError::Busy)?;
+    let permit = s.workers.try_acquire().map_err(|_| ApiError::Busy)?;
+    run_with(s, permit, work).await
+}
+
+/// How long a write waits for a worker before it is answered 503: writes are short, so they
+/// queue behind renders instead of failing at once.
+pub const WRITE_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// [`run_job`] for writes (tile edits, rig and mesh uploads): waits up to [`WRITE_WAIT`] for a
+/// worker instead of answering 503 at once.
+pub async fn run_write<T: Send + 'static>(
+    s: &Arc<AppState>,
+    work: impl FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
+) -> Result<T, ApiError> {
+    let permit = tokio::time::timeout(WRITE_WAIT, s.workers.acquire())
+        .await
+        .map_err(|_| ApiError::Busy)?
+        .map_err(|_| ApiError::Busy)?;
+    run_with(s, permit, work).await
+}
+
+async fn run_with<T: Send + 'static>(
+    s: &Arc<AppState>,
+    _permit: tokio::sync::SemaphorePermit<'_>,
+    work: impl FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
+) -> Result<T, ApiError> {
     let flag = Arc::new(AtomicBool::new(false));
     let _guard = CancelOnDrop(flag.clone());
     let state = s.clone();
     tokio::task::spawn_blocking(move || {
         let out = work(&flag);
-        let counter = if out.is_some() {
-            &state.jobs_done
-        } else {
+        let counter = if flag.load(Ordering::Relaxed) {
             &state.jobs_cancelled
+        } else {
+            &state.jobs_done
         };
         counter.fetch_add(1, Ordering::Relaxed);
         out
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))?
-    .ok_or_else(|| ApiError::Internal("cancelled".into()))
 }
 
-pub fn warp_file(id: &str, rig_revision: u64, tiles_revision: u64) -> String {
-    format!("warps/{id}-r{rig_revision}-t{tiles_revision}.exr")
+pub fn warp_file(id: &str, key: u64) -> String {
+    format!("warps/{id}-{key:016x}.exr")
+}
+
+fn cancelled(cancel: &AtomicBool) -> Result<(), ApiError> {
+    if cancel.load(Ordering::Relaxed) {
+        Err(crate::Error::Cancelled.into())
+    } else {
+        Ok(())
+    }
 }
 
 /// The channel's current state and its computed warp (from the cache, or computed now).
@@ -80,38 +138,46 @@ pub async fn job(s: &Arc<AppState>, id: &str) -> Result<Job, ApiError> {
             g.content.value.clone(),
         )
     };
-    let key = (id.to_string(), rig_revision, tiles_revision);
-    if let Some(c) = s.computed.lock().expect("cache lock").get(&key) {
+    let (geometry_key, key) = keys(&rig, id, &tiles);
+    let cached = s
+        .computed
+        .lock()
+        .expect("cache lock")
+        .get(&(id.to_string(), key))
+        .cloned();
+    if let Some(c) = cached {
         return Ok(Job {
             rig,
             rig_revision,
             tiles_revision,
             canvas,
-            computed: c.clone(),
+            computed: c,
+            key,
         });
     }
     let geometry = s
         .warps
         .lock()
         .expect("cache lock")
-        .get(&(id.to_string(), rig_revision))
+        .get(&(id.to_string(), geometry_key))
         .cloned();
     let (r, id2, state) = (rig.clone(), id.to_string(), s.clone());
     let computed = run_job(s, move |cancel| {
-        let ch = r.channel(&id2).ok()?;
+        let ch = r.channel(&id2)?;
         let geometry = match geometry {
             Some(g) => g,
             None => {
-                let warp = r.warp_unless(ch, cancel)?;
+                let warp = r.warp_unless(ch, cancel).ok_or(crate::Error::Cancelled)?;
                 let weights = r.blend_weights(ch, &warp.points);
                 Arc::new(Geometry { warp, weights })
             }
         };
-        state
-            .warps
-            .lock()
-            .expect("cache lock")
-            .insert((id2.clone(), rig_revision), geometry.clone());
+        {
+            // One geometry per channel: the one of the rig now current.
+            let mut warps = state.warps.lock().expect("cache lock");
+            warps.retain(|k, _| k.0 != id2);
+            warps.insert((id2.clone(), geometry_key), geometry.clone());
+        }
         let (map, f) = match &tiles {
             Some(t) => {
                 let fm = t.feature_map(ch.width as usize, ch.height as usize);
@@ -119,53 +185,69 @@ pub async fn job(s: &Arc<AppState>, id: &str) -> Result<Job, ApiError> {
             }
             None => (geometry.warp.map.clone(), None),
         };
-        if cancel.load(Ordering::Relaxed) {
-            return None;
-        }
+        cancelled(cancel)?;
         if let Some(dir) = &state.store.dir {
-            let path = dir.join(warp_file(&id2, rig_revision, tiles_revision));
-            let mut attrs = map.attributes.clone();
-            attrs.push(("omniwarp.rig_revision".into(), rig_revision.to_string()));
-            attrs.push(("omniwarp.tiles_revision".into(), tiles_revision.to_string()));
-            let written = std::fs::create_dir_all(dir.join("warps"))
-                .map_err(|e| crate::Error::file(dir, e))
-                .and_then(|_| exr_bytes(map.pixels(), &attrs, Precision::Float))
-                .and_then(|bytes| {
-                    atomic_write(&path, |f| {
-                        std::io::Write::write_all(f, &bytes)
-                            .map_err(|e| crate::Error::file(&path, e))
-                    })
-                });
-            match written {
-                Ok(()) => remove_older_warps(dir, &id2, &path),
-                Err(e) => tracing::error!(error = %e, "could not keep the warp map"),
-            }
+            keep_warp(dir, &id2, key, &map, rig_revision, tiles_revision);
         }
-        Some(Arc::new(Computed { geometry, map, f }))
+        Ok(Arc::new(Computed { geometry, map, f }))
     })
     .await?;
-    s.computed
-        .lock()
-        .expect("cache lock")
-        .insert(key, computed.clone());
+    {
+        let mut cache = s.computed.lock().expect("cache lock");
+        cache.retain(|k, _| k.0 != id);
+        cache.insert((id.to_string(), key), computed.clone());
+    }
     Ok(Job {
         rig,
         rig_revision,
         tiles_revision,
         canvas,
         computed,
+        key,
     })
+}
+
+/// Writes the warp map under `warps/` so a restarted daemon serves it without recomputing; a
+/// failure costs only that, so it is logged, not returned.
+fn keep_warp(
+    dir: &std::path::Path,
+    id: &str,
+    key: u64,
+    map: &crate::normalmap::NormalMap,
+    rig_revision: u64,
+    tiles_revision: u64,
+) {
+    let path = dir.join(warp_file(id, key));
+    let mut attrs = map.attributes.clone();
+    attrs.push(("omniwarp.rig_revision".into(), rig_revision.to_string()));
+    attrs.push(("omniwarp.tiles_revision".into(), tiles_revision.to_string()));
+    let written = crate::image_io::create_dir_durably(&dir.join("warps"))
+        .and_then(|_| exr_bytes(map.pixels(), &attrs, Precision::Float))
+        .and_then(|bytes| {
+            atomic_write(&path, |f| {
+                std::io::Write::write_all(f, &bytes).map_err(|e| crate::Error::file(&path, e))
+            })
+        });
+    match written {
+        Ok(()) => remove_older_warps(dir, id, &path),
+        Err(e) => tracing::error!(error = %e, "could not keep the warp map"),
+    }
 }
 
 fn remove_older_warps(dir: &std::path::Path, id: &str, keep: &std::path::Path) {
     let Ok(entries) = std::fs::read_dir(dir.join("warps")) else {
         return;
     };
-    let prefix = format!("{id}-r");
+    let prefix = format!("{id}-");
     for e in entries.flatten() {
         let p = e.path();
         let name = e.file_name().to_string_lossy().into_owned();
-        if p != keep && name.starts_with(&prefix) && name.ends_with(".exr") {
+        // Another channel's id may start with this one's: match the hash's length too.
+        let ours = name
+            .strip_prefix(&prefix)
+            .and_then(|rest| rest.strip_suffix(".exr"))
+            .is_some_and(|hash| hash.len() == 16 && hash.bytes().all(|b| b.is_ascii_hexdigit()));
+        if p != keep && ours {
             let _ = std::fs::remove_file(p);
         }
     }

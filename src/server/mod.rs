@@ -10,7 +10,9 @@ mod channels;
 pub mod client;
 mod error;
 mod exports;
+mod guard;
 mod jobs;
+mod meshes;
 mod outputs;
 mod preview;
 mod rig;
@@ -18,8 +20,9 @@ mod state;
 mod store;
 
 pub use error::ApiError;
-pub use state::AppState;
-pub use store::{Canvas, ChannelData, Store};
+pub use guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
+pub use state::{AppState, MAX_BODY, Options, STREAMS, WORKERS};
+pub use store::{Canvas, ChannelData, OpenOptions, Store};
 
 use axum::Router;
 use axum::extract::{Request, State};
@@ -28,7 +31,9 @@ use axum::middleware::{self, Next};
 use axum::response::Response;
 use std::future::Future;
 use std::sync::Arc;
+use std::time::Duration;
 use tokio::net::TcpListener;
+use tokio::sync::Semaphore;
 
 /// The route table, written once: it builds the router and lists every (method, path) in
 /// [`ROUTES`], which `api/openapi.yaml` is checked against, so the two cannot drift.
@@ -68,14 +73,29 @@ routes! {
     "/v1/channels/{id}/render" => get(outputs::render);
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
+    "/v1/meshes" => get(meshes::list);
+    "/v1/meshes/{name}" => put(meshes::put);
     "/v1/events" => get(rig::events);
 }
 
 pub fn router(state: Arc<AppState>) -> Router {
+    // Layers run outside in: JSON errors, then the guard (Host, Origin, sizes, the body), then
+    // the token, then the route.
     table()
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
-        .layer(axum::extract::DefaultBodyLimit::max(state::MAX_BODY))
+        .method_not_allowed_fallback(|| async {
+            ApiError::refused(
+                axum::http::StatusCode::METHOD_NOT_ALLOWED,
+                None,
+                "this route does not take that method",
+            )
+        })
+        .layer(axum::extract::DefaultBodyLimit::max(
+            crate::limits::MESH_BYTES as usize,
+        ))
         .layer(middleware::from_fn_with_state(state.clone(), auth))
+        .layer(middleware::from_fn_with_state(state.clone(), guard::guard))
+        .layer(middleware::from_fn(guard::json_errors))
         .with_state(state)
 }
 
@@ -106,13 +126,81 @@ async fn auth(
     Ok(next.run(req).await)
 }
 
-/// Serves until `shutdown` completes, then lets in-flight requests finish.
+/// Time a client has to send a request's headers (on a new or a kept-alive connection).
+pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
+/// Time a response may wait on a client that does not read it.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(60);
+/// Connections open at once; more are closed as they arrive. Lowered to fit the process's
+/// file limit, which is raised to its hard limit first.
+pub const CONNECTIONS: usize = 4096;
+/// How long shutting down waits for requests in flight before it gives up on them.
+pub const DRAIN: Duration = Duration::from_secs(5);
+
+/// The connection cap this process can keep: [`CONNECTIONS`], or fewer where the file limit
+/// (raised to its hard limit) leaves less room beside the files the daemon itself opens.
+fn connection_cap() -> usize {
+    let files = rlimit::increase_nofile_limit(u64::MAX).unwrap_or(1024);
+    let room = usize::try_from(files.saturating_sub(256)).unwrap_or(usize::MAX);
+    CONNECTIONS.min(room.max(16))
+}
+
+/// Serves until `shutdown` completes, then stops accepting, ends the change feeds and lets
+/// requests in flight finish for up to [`DRAIN`].
+///
+/// Each connection has a header deadline ([`HEADER_TIMEOUT`], so slow or idle clients cannot
+/// hold connections), a write deadline ([`WRITE_TIMEOUT`]) and counts against the connection
+/// cap; request bodies have their own deadline in the guard.
 pub async fn launch(
     listener: TcpListener,
     state: Arc<AppState>,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    axum::serve(listener, router(state))
-        .with_graceful_shutdown(shutdown)
-        .await
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    let _ = state.bound.set(listener.local_addr()?);
+    let app = router(state.clone());
+    let cap = connection_cap();
+    let open = Arc::new(Semaphore::new(cap));
+    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
+    let mut http = hyper::server::conn::http1::Builder::new();
+    http.timer(TokioTimer::new())
+        .header_read_timeout(HEADER_TIMEOUT)
+        .max_buf_size(MAX_HEADERS * 4);
+    tokio::pin!(shutdown);
+    loop {
+        let stream = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, _)) => stream,
+                Err(e) => {
+                    // Out of file descriptors or similar: wait a moment rather than spin.
+                    tracing::warn!(error = %e, "accept failed");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                    continue;
+                }
+            },
+            () = &mut shutdown => break,
+        };
+        let Ok(permit) = open.clone().try_acquire_owned() else {
+            tracing::warn!(cap, "connection refused: at the connection cap");
+            continue;
+        };
+        let _ = stream.set_nodelay(true);
+        let mut io = tokio_io_timeout::TimeoutStream::new(stream);
+        io.set_write_timeout(Some(WRITE_TIMEOUT));
+        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        let conn = http.serve_connection(TokioIo::new(Box::pin(io)), service);
+        let conn = graceful.watch(conn);
+        tokio::spawn(async move {
+            let _ = conn.await;
+            drop(permit);
+        });
+    }
+    drop(listener);
+    state.stopping.send_replace(true);
+    tokio::select! {
+        () = graceful.shutdown() => {}
+        () = tokio::time::sleep(DRAIN) => {
+            tracing::warn!("requests still running after {} s; stopping anyway", DRAIN.as_secs());
+        }
+    }
+    Ok(())
 }

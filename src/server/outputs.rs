@@ -7,16 +7,17 @@
 //! [`WORKERS`]: super::state::WORKERS
 
 use super::ApiError;
-use super::jobs::{job, run_job, warp_file};
+use super::jobs::{etag, job, keys, run_job, warp_file};
 use super::preview::Look;
-use super::state::AppState;
+use super::state::{AppState, Query};
 use crate::content::pattern::Pattern;
 use crate::image_io::{Precision, exr_bytes, png_bytes};
 use crate::normalmap::NormalMap;
 use crate::raster::Raster;
 use crate::render::Filter;
 use crate::rig::{BlendOptions, blend_png_bytes};
-use axum::extract::{Path, Query, State};
+use axum::body::{Body, Bytes};
+use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
@@ -26,12 +27,42 @@ use std::sync::atomic::Ordering;
 /// Largest preview, pixels.
 const MAX_PREVIEW: usize = 4096 * 2304;
 
-pub fn file(bytes: Vec<u8>, mime: &'static str, etag: &str) -> Response {
-    let mut resp = ([(header::CONTENT_TYPE, mime)], bytes).into_response();
+/// A large response: its bytes leave in pieces, and the body holds one of the
+/// [`STREAMS`](super::state::STREAMS) permits until it is sent or dropped, so clients that do not
+/// read cannot make the daemon hold more than that many bodies (503 beyond).
+pub fn file(
+    s: &AppState,
+    bytes: Vec<u8>,
+    mime: &'static str,
+    etag: &str,
+) -> Result<Response, ApiError> {
+    let permit = s
+        .streams
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ApiError::Busy)?;
+    let len = bytes.len();
+    let bytes = Bytes::from(bytes);
+    const PIECE: usize = 256 << 10;
+    let pieces = futures_util::stream::unfold((0usize, permit), move |(at, permit)| {
+        let bytes = bytes.clone();
+        async move {
+            (at < bytes.len()).then(|| {
+                let end = (at + PIECE).min(bytes.len());
+                (
+                    Ok::<_, std::convert::Infallible>(bytes.slice(at..end)),
+                    (end, permit),
+                )
+            })
+        }
+    });
+    let mut resp = ([(header::CONTENT_TYPE, mime)], Body::from_stream(pieces)).into_response();
+    let h = resp.headers_mut();
+    h.insert(header::CONTENT_LENGTH, len.into());
     if let Ok(v) = etag.parse() {
-        resp.headers_mut().insert(header::ETAG, v);
+        h.insert(header::ETAG, v);
     }
-    resp
+    Ok(resp)
 }
 
 pub async fn warp(
@@ -39,17 +70,22 @@ pub async fn warp(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     // After a restart the kept file answers without recomputing.
-    let (_, rig_revision) = s.store.snapshot();
+    let (rig, rig_revision) = s.store.snapshot();
     if let (Some(dir), Some(data)) = (&s.store.dir, s.store.channel(&id)) {
-        let tiles_revision = data.lock().await.tiles.revision;
-        let path = dir.join(warp_file(&id, rig_revision, tiles_revision));
+        let (tiles, tiles_revision) = {
+            let g = data.lock().await;
+            (g.tiles.value.clone(), g.tiles.revision)
+        };
+        let (_, key) = keys(&rig, &id, &tiles);
+        let path = dir.join(warp_file(&id, key));
         let read = tokio::task::spawn_blocking(move || std::fs::read(path)).await;
         if let Ok(Ok(bytes)) = read {
-            return Ok(file(
+            return file(
+                &s,
                 bytes,
                 "image/x-exr",
-                &format!("\"{rig_revision}.{tiles_revision}\""),
-            ));
+                &etag(key, rig_revision, tiles_revision),
+            );
         }
     }
     let j = job(&s, &id).await?;
@@ -59,8 +95,12 @@ pub async fn warp(
         "omniwarp.tiles_revision".into(),
         j.tiles_revision.to_string(),
     ));
-    let bytes = exr_bytes(j.computed.map.pixels(), &attrs, Precision::Float)?;
-    Ok(file(bytes, "image/x-exr", &j.etag()))
+    let computed = j.computed.clone();
+    let bytes = run_job(&s, move |_| {
+        Ok(exr_bytes(computed.map.pixels(), &attrs, Precision::Float)?)
+    })
+    .await?;
+    file(&s, bytes, "image/x-exr", &j.etag())
 }
 
 #[derive(Deserialize)]
@@ -81,17 +121,17 @@ pub async fn blend(
         .channel(&id)
         .map_err(|_| ApiError::NotFound(id.clone()))?;
     let gamma = q.gamma.unwrap_or(2.2);
-    let bytes = blend_png_bytes(
-        ch.width,
-        ch.height,
-        &j.computed.geometry.weights,
-        BlendOptions { gamma },
-    )
-    .map_err(|e| ApiError::Invalid {
-        field: "gamma".into(),
-        reason: e.reason(),
-    })?;
-    Ok(file(bytes, "image/png", &j.etag()))
+    let (w, h, computed) = (ch.width, ch.height, j.computed.clone());
+    let bytes = run_job(&s, move |_| {
+        blend_png_bytes(w, h, &computed.geometry.weights, BlendOptions { gamma }).map_err(|e| {
+            ApiError::Invalid {
+                field: "gamma".into(),
+                reason: e.reason(),
+            }
+        })
+    })
+    .await?;
+    file(&s, bytes, "image/png", &j.etag())
 }
 
 #[derive(Deserialize)]
@@ -222,7 +262,7 @@ pub async fn render(
                 .map(|n| src.data[pick(n % ow, n / ow)])
                 .collect(),
         };
-        let map = NormalMap::from_pixels(sub, vec![]).ok()?;
+        let map = NormalMap::from_pixels(sub, vec![])?;
         let weights: Vec<f32> = (0..ow * oh)
             .map(|n| computed.geometry.weights[pick(n % ow, n / ow)])
             .collect();
@@ -231,7 +271,7 @@ pub async fn render(
             .as_ref()
             .map(|f| (0..ow * oh).map(|n| f[pick(n % ow, n / ow)]).collect());
         if cancel.load(Ordering::Relaxed) {
-            return None;
+            return Err(crate::Error::Cancelled.into());
         }
         let look = Look {
             pattern,
@@ -239,10 +279,9 @@ pub async fn render(
             filter,
         };
         if let Some(g) = &gpu {
-            return Some(
-                look.render_gpu(g, &map, &weights, f.as_deref())
-                    .and_then(|img| png_bytes(&img)),
-            );
+            return Ok(look
+                .render_gpu(g, &map, &weights, f.as_deref())
+                .and_then(|img| png_bytes(&img))?);
         }
         let encoded = if exr {
             let img = look.render::<[f32; 4]>(&map, &weights, f.as_deref(), 1.0, 1.0)?;
@@ -251,13 +290,13 @@ pub async fn render(
             let img = look.render::<[u8; 4]>(&map, &weights, f.as_deref(), 2.2, 255.0)?;
             png_bytes(&img)
         };
-        Some(encoded)
+        Ok(encoded?)
     })
-    .await?
-    .map_err(ApiError::from)?;
-    Ok(file(
+    .await?;
+    file(
+        &s,
         bytes,
         if exr { "image/x-exr" } else { "image/png" },
         &etag,
-    ))
+    )
 }

@@ -36,18 +36,18 @@ impl Look {
         f: Option<&[f32]>,
         gamma: f64,
         full: f32,
-    ) -> Option<Raster<T>> {
+    ) -> crate::Result<Raster<T>> {
         let cube = CubeMap::<T>::from_fn(self.face, 1, |d| {
             T::from_f32(self.pattern.eval(d).map(|c| c * full))
         });
         let content = Content::cube(&cube);
         let (w, h) = (map.width() as u32, map.height() as u32);
-        let mut img = render::render(Warp::Map(map), &content, w, h, 1, self.filter).ok()?;
+        let mut img = render::render(Warp::Map(map), &content, w, h, 1, self.filter)?;
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
         attenuate(&mut img, weights, gamma);
-        Some(img)
+        Ok(img)
     }
 
     /// [`Look::render`] of 8-bit PNG previews with the warp on the GPU.

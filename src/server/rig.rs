@@ -1,6 +1,7 @@
 //! The rig routes: health, version, the rig document and its channels, and the change feed.
 
 use super::ApiError;
+use super::jobs::run_write;
 use super::state::{AppState, WORKERS, if_match, tagged};
 use crate::rig::Rig;
 use axum::Json;
@@ -10,7 +11,6 @@ use axum::http::HeaderMap;
 use axum::response::Response;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
-use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use tokio_stream::StreamExt;
@@ -54,14 +54,9 @@ pub async fn commit_rig(s: &Arc<AppState>, wanted: u64, rig: Rig) -> Result<u64,
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))??;
     s.store.install(rig, revision);
-    s.warps
-        .lock()
-        .expect("cache lock")
-        .retain(|k, _| k.1 == revision);
-    s.computed
-        .lock()
-        .expect("cache lock")
-        .retain(|k, _| k.1 == revision);
+    // Cached warps are keyed by content; those of the old rig can only take memory now.
+    s.warps.lock().expect("cache lock").clear();
+    s.computed.lock().expect("cache lock").clear();
     s.announce(serde_json::json!({"kind": "rig", "revision": revision}));
     tracing::info!(revision, "rig updated");
     Ok(revision)
@@ -77,8 +72,12 @@ pub async fn put_rig(
         field: "/".into(),
         reason: "the body is not UTF-8".into(),
     })?;
-    let base = s.store.dir.clone().unwrap_or_else(|| PathBuf::from("."));
-    let rig = Rig::from_json(text, &base)?;
+    // Reading a mesh and validating a large rig is blocking work: in the pool, under a permit.
+    let (state, text) = (s.clone(), text.to_string());
+    let rig = run_write(&s, move |_| {
+        Ok(state.store.accept_rig(&text, state.options.memory_budget)?)
+    })
+    .await?;
     let revision = commit_rig(&s, wanted, rig).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
@@ -96,7 +95,8 @@ pub async fn channels(State(s): State<Arc<AppState>>) -> Response {
     )
 }
 
-/// The change feed: the rig's revision first, then every change as it is made.
+/// The change feed: the rig's revision first, then every change as it is made, until the
+/// server shuts down (the stream ends then, so shutting down does not wait on listeners).
 pub async fn events(
     State(s): State<Arc<AppState>>,
 ) -> Sse<impl Stream<Item = Result<Event, std::convert::Infallible>>> {
@@ -106,5 +106,13 @@ pub async fn events(
     let rest = BroadcastStream::new(s.events.subscribe())
         .filter_map(|r| r.ok())
         .map(|c| Ok(Event::default().event("change").data(c)));
-    Sse::new(first.chain(rest)).keep_alive(KeepAlive::default())
+    let mut stopping = s.stopping.subscribe();
+    let stop = async move {
+        let _ = stopping.wait_for(|&stop| stop).await;
+    };
+    Sse::new(futures_util::StreamExt::take_until(
+        first.chain(rest),
+        Box::pin(stop),
+    ))
+    .keep_alive(KeepAlive::default())
 }

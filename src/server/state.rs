@@ -13,27 +13,69 @@ use axum::http::{HeaderMap, HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use serde::de::DeserializeOwned;
 use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::atomic::AtomicU64;
-use std::sync::{Arc, Mutex};
-use tokio::sync::{Semaphore, broadcast};
+use std::sync::{Arc, Mutex, OnceLock};
+use tokio::sync::{Semaphore, broadcast, watch};
 
 /// Largest request body, bytes.
 pub const MAX_BODY: usize = 4 << 20;
 
-/// Renders, warps and calibrations running at once; more get 503 with Retry-After.
+/// Renders, warps, edits, calibrations and exports running at once; more get 503 with
+/// Retry-After.
 pub const WORKERS: usize = 2;
+
+/// Large responses (warp maps, exports, previews) being sent at once: each holds its body in
+/// memory until the client has read it, so a client that never reads cannot pile them up.
+pub const STREAMS: usize = 16;
+
+/// How the daemon was started: who may call it and how much it may hold.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Every request must carry `Authorization: Bearer <token>` when set.
+    pub token: Option<String>,
+    /// Bytes the warps of a rig may hold at once (see [`crate::limits::MEMORY_BUDGET`]).
+    pub memory_budget: u64,
+    /// Host names (beyond loopback names and addresses and the bound address) requests may
+    /// name in `Host`.
+    pub allow_hosts: Vec<String>,
+    /// Origins (`scheme://host[:port]`) beyond the daemon's own that browsers may call it from.
+    pub allow_origins: Vec<String>,
+    /// A directory mesh screens may be read from, besides the data directory's `meshes/`.
+    pub assets: Option<PathBuf>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            token: None,
+            memory_budget: crate::limits::MEMORY_BUDGET,
+            allow_hosts: Vec::new(),
+            allow_origins: Vec::new(),
+            assets: None,
+        }
+    }
+}
 
 pub struct AppState {
     pub store: Store,
+    pub options: Options,
     pub token: Option<String>,
+    /// The address the server listens on, once it does (the `Host` check allows it).
+    pub bound: OnceLock<SocketAddr>,
     /// Changes as JSON: `{"kind": "rig"|"content"|"tiles"|"proposal", …}`.
     pub events: broadcast::Sender<String>,
+    /// Flips to true when the server shuts down; event streams end on it.
+    pub stopping: watch::Sender<bool>,
     /// Bounds the expensive work running at once, so it never starves the API.
     pub workers: Semaphore,
-    /// Geometric warps and blend weights by (channel, rig revision).
+    /// Bounds the large responses in flight (see [`STREAMS`]).
+    pub streams: Arc<Semaphore>,
+    /// Geometric warps and blend weights by channel and a hash of what they are computed from.
     pub warps: Mutex<HashMap<(String, u64), Arc<Geometry>>>,
-    /// Effective warps by (channel, rig revision, tiles revision).
-    pub computed: Mutex<HashMap<(String, u64, u64), Arc<Computed>>>,
+    /// Effective warps by channel and a hash of the geometry's inputs and the tile screen.
+    pub computed: Mutex<HashMap<(String, u64), Arc<Computed>>>,
     pub jobs_done: AtomicU64,
     pub jobs_cancelled: AtomicU64,
     /// The GPU for previews (`?renderer=gpu`), opened on first use.
@@ -42,11 +84,25 @@ pub struct AppState {
 
 impl AppState {
     pub fn new(store: Store, token: Option<String>) -> Arc<Self> {
+        Self::with_options(
+            store,
+            Options {
+                token,
+                ..Options::default()
+            },
+        )
+    }
+
+    pub fn with_options(store: Store, options: Options) -> Arc<Self> {
         Arc::new(AppState {
             store,
-            token,
+            token: options.token.clone(),
+            options,
+            bound: OnceLock::new(),
             events: broadcast::channel(256).0,
+            stopping: watch::channel(false).0,
             workers: Semaphore::new(WORKERS),
+            streams: Arc::new(Semaphore::new(STREAMS)),
             warps: Mutex::new(HashMap::new()),
             computed: Mutex::new(HashMap::new()),
             jobs_done: AtomicU64::new(0),
@@ -77,27 +133,64 @@ pub fn tagged(body: serde_json::Value, revision: u64) -> Response {
     resp
 }
 
-/// The revision an edit is based on, from `If-Match`.
+/// The revision an edit is based on, from `If-Match`: `"<n>"` or `W/"<n>"`, nothing else.
 pub fn if_match(headers: &HeaderMap) -> Result<u64, ApiError> {
     let v = headers
         .get(header::IF_MATCH)
         .ok_or(ApiError::PreconditionRequired)?;
     v.to_str()
         .ok()
-        .map(|s| s.trim().trim_start_matches("W/").trim_matches('"'))
-        .and_then(|s| s.parse().ok())
+        .map(str::trim)
+        .map(|s| s.strip_prefix("W/").unwrap_or(s))
+        .and_then(|s| s.strip_prefix('"')?.strip_suffix('"'))
+        .filter(|n| !n.is_empty() && n.len() <= 19 && n.bytes().all(|b| b.is_ascii_digit()))
+        .and_then(|n| n.parse().ok())
         .ok_or_else(|| ApiError::Invalid {
             field: "If-Match".into(),
-            reason: "must be a revision such as \"3\"".into(),
+            reason: "must be a revision in quotes, such as \"3\" (or W/\"3\")".into(),
         })
 }
 
 /// Parses a JSON body, naming the offending field by JSON pointer; unknown fields are refused
-/// by the types themselves.
+/// by the types themselves, and anything after the document but white space is refused too.
 pub fn parse_body<T: DeserializeOwned>(body: &Bytes) -> Result<T, ApiError> {
-    let de = &mut serde_json::Deserializer::from_slice(body);
-    serde_path_to_error::deserialize(de).map_err(|e| ApiError::Invalid {
+    let mut de = serde_json::Deserializer::from_slice(body);
+    let value = serde_path_to_error::deserialize(&mut de).map_err(|e| ApiError::Invalid {
         field: crate::rig::pointer_of(&e.path().to_string()),
         reason: e.into_inner().to_string(),
-    })
+    })?;
+    de.end().map_err(|e| ApiError::Invalid {
+        field: "/".into(),
+        reason: format!("the body goes on after its JSON document: {e}"),
+    })?;
+    Ok(value)
+}
+
+/// A query string as `T`; a parameter that cannot be read is refused with its name as `field`
+/// (the framework's own extractor answers in plain text without naming it).
+pub struct Query<T>(pub T);
+
+impl<T: DeserializeOwned, S: Send + Sync> axum::extract::FromRequestParts<S> for Query<T> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(
+        parts: &mut axum::http::request::Parts,
+        _: &S,
+    ) -> Result<Self, ApiError> {
+        let q = parts.uri.query().unwrap_or("");
+        let de = serde_urlencoded::Deserializer::new(form_urlencoded::parse(q.as_bytes()));
+        serde_path_to_error::deserialize(de)
+            .map(Query)
+            .map_err(|e| {
+                let path = e.path().to_string();
+                let reason = e.into_inner().to_string();
+                // serde_urlencoded reports an unknown parameter at the root; name it.
+                let field = match reason.strip_prefix("unknown field `") {
+                    Some(rest) => rest.split('`').next().unwrap_or("query").to_string(),
+                    None if path == "." => "query".to_string(),
+                    None => path,
+                };
+                ApiError::Invalid { field, reason }
+            })
+    }
 }

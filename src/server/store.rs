@@ -4,9 +4,15 @@
 //! Every write goes through [`save`]: the previous good file is kept as `<name>.prev` and the new
 //! one is written atomically (temp file, fsync, rename, fsync dir), so an acknowledged edit
 //! survives a crash and a damaged file falls back to the last good revision. Layout under the
-//! data directory: `rig.json`, `channels/<id>.json`, `proposals/<n>.json`.
+//! data directory: `rig.json`, `channels/<id>.json`, `proposals/<n>.json`, `meshes/<name>.obj`
+//! (uploaded mesh screens) and `warps/` (computed warp maps, a cache).
+//!
+//! What is read from disk is accepted as if a client had sent it: the same validation and
+//! limits run at start-up, a file that fails them falls back to its `.prev` (the reason
+//! logged), and when both fail the daemon refuses to start unless told to `reset` — a damaged
+//! data directory is never silently replaced, not even by the demo rig.
 
-use crate::image_io::atomic_write;
+use crate::image_io::{atomic_write, create_dir_durably, remove_leftovers};
 use crate::rig::{Rig, RigDoc};
 use crate::tiles::TileScreen;
 use serde::de::DeserializeOwned;
@@ -118,6 +124,7 @@ pub struct Proposal {
 
 pub struct Store {
     pub dir: Option<PathBuf>,
+    pub meshes: MeshDirs,
     current: RwLock<(Arc<Rig>, u64)>,
     /// Serialises rig writers, so revision checks and durability happen in order.
     pub rig_writer: tokio::sync::Mutex<()>,
@@ -126,12 +133,36 @@ pub struct Store {
     pub next_proposal: AtomicU64,
 }
 
+/// How a store is opened.
+#[derive(Debug, Clone)]
+pub struct OpenOptions {
+    /// The rig to start from when the data directory holds none.
+    pub initial: Option<RigDoc>,
+    /// Start from `initial` even when the data directory's files are damaged beyond their
+    /// `.prev` (the damaged files are kept beside as `<name>.damaged`).
+    pub reset: bool,
+    /// Warps of all channels together may take this many bytes.
+    pub memory_budget: u64,
+    pub assets: Option<PathBuf>,
+}
+
+impl Default for OpenOptions {
+    fn default() -> Self {
+        OpenOptions {
+            initial: None,
+            reset: false,
+            memory_budget: crate::limits::MEMORY_BUDGET,
+            assets: None,
+        }
+    }
+}
+
 /// Writes `bytes` as `dir/name`, keeping the previous file as `name.prev` when it still parses
 /// as `T` (a damaged file must not overwrite the last good one).
 pub fn save<T: DeserializeOwned>(dir: &Path, name: &str, bytes: &[u8]) -> crate::Result<()> {
     let path = dir.join(name);
     if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| crate::Error::file(parent, e))?;
+        create_dir_durably(parent)?;
     }
     if let Ok(old) = std::fs::read(&path)
         && serde_json::from_slice::<T>(&old).is_ok()
@@ -146,79 +177,174 @@ pub fn save<T: DeserializeOwned>(dir: &Path, name: &str, bytes: &[u8]) -> crate:
     })
 }
 
-/// Reads `dir/name`, or `name.prev` when the first is missing or damaged (said in the log).
-pub fn load<T>(dir: &Path, name: &str, parse: impl Fn(&Path) -> crate::Result<T>) -> Option<T> {
+/// What reading a file and its `.prev` gave.
+pub enum Loaded<T> {
+    /// Neither file exists.
+    Missing,
+    Found(T),
+    /// Both exist but fail; the reasons, for the refusal to start.
+    Damaged(Vec<String>),
+}
+
+/// Reads `dir/name`, or `name.prev` when the first is missing or fails `parse` (which
+/// validates as a request would); each failure is logged with its reason.
+pub fn load<T>(dir: &Path, name: &str, parse: impl Fn(&Path) -> crate::Result<T>) -> Loaded<T> {
+    let mut reasons = Vec::new();
     for file in [name.to_string(), format!("{name}.prev")] {
         let path = dir.join(&file);
         if !path.exists() {
             continue;
         }
         match parse(&path) {
-            Ok(v) => return Some(v),
-            Err(e) => tracing::error!(file = %path.display(), error = %e,
-                "unreadable file; trying the previous good one"),
+            Ok(v) => return Loaded::Found(v),
+            Err(e) => {
+                tracing::error!(file = %path.display(), error = %e,
+                    "refused on loading; trying the previous good one");
+                reasons.push(format!("{}: {e}", path.display()));
+            }
         }
     }
-    None
+    if reasons.is_empty() {
+        Loaded::Missing
+    } else {
+        Loaded::Damaged(reasons)
+    }
 }
 
+/// Reads a JSON file of at most `MAX_FILE` bytes.
 fn parse_json<T: DeserializeOwned>(path: &Path) -> crate::Result<T> {
-    let text = std::fs::read(path).map_err(|e| crate::Error::file(path, e))?;
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| crate::Error::file(path, e))?;
+    let mut text = Vec::new();
+    file.take(MAX_FILE + 1)
+        .read_to_end(&mut text)
+        .map_err(|e| crate::Error::file(path, e))?;
+    if text.len() as u64 > MAX_FILE {
+        return Err(crate::Error::file(path, format!("above {MAX_FILE} bytes")));
+    }
     serde_json::from_slice(&text).map_err(|e| crate::Error::file(path, e))
 }
 
-fn load_rig(path: &Path) -> crate::Result<(Rig, u64)> {
-    let saved: SavedRig = parse_json(path)?;
-    let mut doc = saved.rig;
-    doc.screen
-        .load(path.parent().unwrap_or(Path::new(".")), "/rig/screen")?;
-    Ok((Rig::from_doc(doc)?, saved.revision))
+/// Largest state file read back, bytes: a request body can be no larger than this either.
+const MAX_FILE: u64 = 16 << 20;
+
+/// A mesh screen's name as the daemon accepts it: a plain file name of a safe alphabet ending in
+/// `.obj`, so no path outside the mesh directories can be named.
+pub fn mesh_name(name: &str) -> crate::Result<&str> {
+    let safe = |c: char| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.');
+    if name.len() <= 64
+        && name.chars().all(safe)
+        && !name.starts_with('.')
+        && name.ends_with(".obj")
+    {
+        Ok(name)
+    } else {
+        Err(crate::Error::invalid(
+            "obj",
+            "must name a mesh uploaded with PUT /v1/meshes/{name} or kept in --assets: 1–64 \
+             letters, digits, '-', '_' or '.', ending in .obj, no directories",
+        ))
+    }
 }
 
 impl Store {
     /// Loads the rig and the proposals from `dir`, else starts from `initial`.
     pub fn open(dir: Option<PathBuf>, initial: Option<RigDoc>) -> crate::Result<Store> {
-        let mut loaded = None;
-        let mut proposals = HashMap::new();
+        Self::open_with(
+            dir,
+            OpenOptions {
+                initial,
+                ..OpenOptions::default()
+            },
+        )
+    }
+
+    pub fn open_with(dir: Option<PathBuf>, o: OpenOptions) -> crate::Result<Store> {
+        let meshes = MeshDirs {
+            data: dir.as_ref().map(|d| d.join("meshes")),
+            assets: o.assets.clone(),
+        };
+        let mut loaded = Loaded::Missing;
         if let Some(d) = &dir {
             std::fs::create_dir_all(d).map_err(|e| crate::Error::file(d, e))?;
-            loaded = load(d, "rig.json", load_rig);
-            if let Ok(entries) = std::fs::read_dir(d.join("proposals")) {
-                for e in entries.flatten() {
-                    let path = e.path();
-                    if path.extension().is_some_and(|x| x == "json") {
-                        match parse_json::<Proposal>(&path) {
-                            Ok(p) => {
-                                proposals.insert(p.id, Arc::new(p));
-                            }
-                            Err(e) => tracing::error!(error = %e, "unreadable proposal"),
-                        }
+            for sub in ["", "channels", "proposals", "warps", "meshes"] {
+                let n = remove_leftovers(&d.join(sub));
+                if n > 0 {
+                    tracing::warn!(dir = %d.join(sub).display(), n,
+                        "removed temporary files a killed process left");
+                }
+            }
+            loaded = load(d, "rig.json", |p| load_rig(p, &meshes, o.memory_budget));
+        }
+        let (rig, revision) = match (loaded, &o.initial) {
+            (Loaded::Found(found), _) => found,
+            (Loaded::Damaged(reasons), _) if !o.reset => {
+                return Err(damaged("rig.json", &reasons));
+            }
+            (Loaded::Damaged(_), _) => {
+                set_aside(dir.as_deref(), "rig.json");
+                match &o.initial {
+                    Some(doc) => (meshes.accept(doc.clone(), o.memory_budget)?, 1),
+                    None => {
+                        return Err(crate::Error::invalid(
+                            "data",
+                            "--reset needs a rig to start from: give --demo",
+                        ));
                     }
                 }
             }
-        }
-        let (rig, revision) = match (loaded, initial) {
-            (Some(found), _) => found,
-            (None, Some(doc)) => (Rig::from_doc(doc)?, 1),
-            (None, None) => {
+            (_, Some(doc)) => (meshes.accept(doc.clone(), o.memory_budget)?, 1),
+            (_, None) => {
                 return Err(crate::Error::invalid(
                     "data",
                     "no rig in the data directory; start with --demo or put a rig.json there",
                 ));
             }
         };
+        let mut channels = HashMap::new();
+        let mut proposals = HashMap::new();
+        if let Some(d) = &dir {
+            // The rig's channels are validated now, so a damaged file stops the start.
+            for ch in &rig.channels {
+                let data = match load(d, &channel_file(&ch.id), parse_channel) {
+                    Loaded::Found(data) => data,
+                    Loaded::Missing => ChannelData::default(),
+                    Loaded::Damaged(_) if o.reset => {
+                        set_aside(Some(d), &channel_file(&ch.id));
+                        ChannelData::default()
+                    }
+                    Loaded::Damaged(reasons) => {
+                        return Err(damaged(&channel_file(&ch.id), &reasons));
+                    }
+                };
+                channels.insert(ch.id.clone(), Arc::new(tokio::sync::Mutex::new(data)));
+            }
+            proposals = load_proposals(d, &rig);
+        }
         let next = proposals.keys().max().map_or(1, |m| m + 1);
         let store = Store {
             dir,
+            meshes,
             current: RwLock::new((Arc::new(rig), revision)),
             rig_writer: tokio::sync::Mutex::new(()),
-            channels: Mutex::new(HashMap::new()),
+            channels: Mutex::new(channels),
             proposals: Mutex::new(proposals),
             next_proposal: AtomicU64::new(next),
         };
         let (rig, revision) = store.snapshot();
         store.save_rig(&rig.doc, revision)?;
         Ok(store)
+    }
+
+    /// Where mesh `name` is read from (see [`MeshDirs::path`]).
+    pub fn mesh_path(&self, name: &str) -> crate::Result<PathBuf> {
+        self.meshes.path(name)
+    }
+
+    /// A rig document from a client: parsed, its mesh read from the mesh directories only,
+    /// validated, and within `budget`.
+    pub fn accept_rig(&self, text: &str, budget: u64) -> crate::Result<Rig> {
+        self.meshes.accept(RigDoc::parse(text)?, budget)
     }
 
     pub fn snapshot(&self) -> (Arc<Rig>, u64) {
@@ -248,17 +374,21 @@ impl Store {
             .expect("no writer panics while holding the lock") = (Arc::new(rig), revision);
     }
 
-    /// The editable state of channel `id` of the current rig (loaded on first use).
+    /// The editable state of channel `id` of the current rig (a channel new to the rig starts
+    /// from the defaults, or from a valid file a former rig left).
     pub fn channel(&self, id: &str) -> Option<Arc<tokio::sync::Mutex<ChannelData>>> {
         let (rig, _) = self.snapshot();
         rig.channel(id).ok()?;
         let mut map = self.channels.lock().expect("channel map lock");
         let entry = map.entry(id.to_string()).or_insert_with(|| {
-            let data = self
+            let data = match self
                 .dir
                 .as_ref()
-                .and_then(|d| load(d, &channel_file(id), parse_json::<ChannelData>))
-                .unwrap_or_default();
+                .map(|d| load(d, &channel_file(id), parse_channel))
+            {
+                Some(Loaded::Found(data)) => data,
+                _ => ChannelData::default(),
+            };
             Arc::new(tokio::sync::Mutex::new(data))
         });
         Some(entry.clone())
@@ -276,6 +406,147 @@ impl Store {
         let bytes = serde_json::to_vec_pretty(p).expect("proposals serialise");
         save::<Proposal>(dir, &format!("proposals/{}.json", p.id), &bytes)
     }
+
+    /// Keeps `p` and drops the oldest proposals beyond [`crate::limits::PROPOSALS`] (their
+    /// files too); returns the ids dropped.
+    pub fn keep_proposal(&self, p: Proposal) -> Vec<u64> {
+        let mut map = self.proposals.lock().expect("proposal lock");
+        map.insert(p.id, Arc::new(p));
+        let mut ids: Vec<u64> = map.keys().copied().collect();
+        ids.sort_unstable();
+        let excess = ids.len().saturating_sub(crate::limits::PROPOSALS);
+        let dropped: Vec<u64> = ids[..excess].to_vec();
+        for id in &dropped {
+            map.remove(id);
+            if let Some(d) = &self.dir {
+                for f in [format!("{id}.json"), format!("{id}.json.prev")] {
+                    let _ = std::fs::remove_file(d.join("proposals").join(f));
+                }
+            }
+        }
+        dropped
+    }
+}
+
+/// Keeps a damaged file and its `.prev` as `<name>.damaged` and `<name>.prev.damaged`, for
+/// whoever wants to look at them after a `--reset`.
+fn set_aside(dir: Option<&Path>, name: &str) {
+    let Some(d) = dir else { return };
+    for f in [name.to_string(), format!("{name}.prev")] {
+        let from = d.join(&f);
+        if from.exists() {
+            let to = d.join(format!("{f}.damaged"));
+            match std::fs::rename(&from, &to) {
+                Ok(()) => tracing::warn!(file = %to.display(), "damaged file set aside (--reset)"),
+                Err(e) => {
+                    tracing::error!(file = %from.display(), error = %e, "could not set aside")
+                }
+            }
+        }
+    }
+}
+
+fn damaged(name: &str, reasons: &[String]) -> crate::Error {
+    crate::Error::invalid(
+        "data",
+        format!(
+            "{name} and its .prev are both damaged ({}); restore them, or start with --reset to \
+             begin again from --demo or an empty state",
+            reasons.join("; ")
+        ),
+    )
+}
+
+/// A channel's saved state, validated as a PUT of its content and tiles would be.
+fn parse_channel(path: &Path) -> crate::Result<ChannelData> {
+    let data: ChannelData = parse_json(path)?;
+    data.content
+        .value
+        .view()
+        .map_err(|e| crate::Error::file(path, format!("content: {e}")))?;
+    if let Some(t) = &data.tiles.value {
+        t.validate()
+            .map_err(|e| crate::Error::file(path, format!("tiles: {e}")))?;
+    }
+    Ok(data)
+}
+
+/// The proposals kept under `dir/proposals`, each one checked by putting its channel into `rig`
+/// (refused ones are logged and left out), the newest [`crate::limits::PROPOSALS`] only.
+fn load_proposals(dir: &Path, rig: &Rig) -> HashMap<u64, Arc<Proposal>> {
+    let mut found = HashMap::new();
+    let Ok(entries) = std::fs::read_dir(dir.join("proposals")) else {
+        return found;
+    };
+    for e in entries.flatten() {
+        let path = e.path();
+        if path.extension().is_none_or(|x| x != "json") {
+            continue;
+        }
+        let checked = parse_json::<Proposal>(&path).and_then(|p| {
+            let mut doc = rig.doc.clone();
+            if let Some(slot) = doc.channels.iter_mut().find(|c| c.id == p.channel) {
+                *slot = p.proposed.clone();
+                Rig::from_doc(doc)?;
+            }
+            Ok(p)
+        });
+        match checked {
+            Ok(p) => {
+                found.insert(p.id, Arc::new(p));
+            }
+            Err(e) => {
+                tracing::error!(file = %path.display(), error = %e, "proposal refused on loading")
+            }
+        }
+    }
+    let mut ids: Vec<u64> = found.keys().copied().collect();
+    ids.sort_unstable();
+    for id in &ids[..ids.len().saturating_sub(crate::limits::PROPOSALS)] {
+        found.remove(id);
+    }
+    found
+}
+
+/// Where mesh screens are read from: the data directory's `meshes/` (uploads), then the
+/// `--assets` directory. No other path can be named.
+#[derive(Debug, Clone)]
+pub struct MeshDirs {
+    pub data: Option<PathBuf>,
+    pub assets: Option<PathBuf>,
+}
+
+impl MeshDirs {
+    /// The file of mesh `name`; the answer for a name that is not allowed does not depend on
+    /// what exists on disk.
+    pub fn path(&self, name: &str) -> crate::Result<PathBuf> {
+        let name = mesh_name(name)?;
+        [&self.data, &self.assets]
+            .into_iter()
+            .flatten()
+            .map(|d| d.join(name))
+            .find(|p| p.is_file())
+            .ok_or_else(|| {
+                crate::Error::invalid(
+                    "obj",
+                    format!("no mesh `{name}`: upload it with PUT /v1/meshes/{name}"),
+                )
+            })
+    }
+
+    /// A rig document with its mesh loaded from these directories, validated and within
+    /// `budget`.
+    pub fn accept(&self, mut doc: RigDoc, budget: u64) -> crate::Result<Rig> {
+        doc.screen.load_with("/screen", |n| self.path(n))?;
+        let rig = Rig::from_doc(doc)?;
+        rig.check_budget(budget)?;
+        Ok(rig)
+    }
+}
+
+fn load_rig(path: &Path, meshes: &MeshDirs, budget: u64) -> crate::Result<(Rig, u64)> {
+    let saved: SavedRig = parse_json(path)?;
+    Ok((meshes.accept(saved.rig, budget)?, saved.revision))
 }
 
 /// Channel ids are restricted to a file-safe alphabet by rig validation.

@@ -195,13 +195,45 @@ fn moller_trumbore(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<f64> {
 
 /// The triangles of an OBJ file in file order: `v` and `f` lines (polygons fanned into
 /// triangles; `f 1/2/3 …` and negative indices accepted; everything else ignored).
+///
+/// Only a regular file of at most [`crate::limits::MESH_BYTES`] is read: a device or a FIFO
+/// named as a mesh would never end.
 pub fn read_obj_triangles(path: &Path) -> Result<Vec<[DVec3; 3]>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e))?;
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
+    let meta = file.metadata().map_err(|e| Error::file(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::file(path, "not a regular file"));
+    }
+    let limit = crate::limits::MESH_BYTES;
+    if meta.len() > limit {
+        return Err(Error::file(
+            path,
+            format!("{} bytes is above the mesh limit of {limit}", meta.len()),
+        ));
+    }
+    let mut bytes = Vec::new();
+    file.take(limit + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| Error::file(path, e))?;
+    if bytes.len() as u64 > limit {
+        return Err(Error::file(
+            path,
+            format!("above the mesh limit of {limit} bytes"),
+        ));
+    }
+    let text = String::from_utf8(bytes).map_err(|_| Error::file(path, "not UTF-8 text"))?;
+    parse_obj_triangles(&text).map_err(|e| Error::file(path, e.reason()))
+}
+
+/// The triangles of OBJ text (see [`read_obj_triangles`]); at most
+/// [`crate::limits::MESH_TRIANGLES`].
+pub fn parse_obj_triangles(text: &str) -> Result<Vec<[DVec3; 3]>> {
     let mut verts = Vec::new();
     let mut tris = Vec::new();
     for (no, line) in text.lines().enumerate() {
         let mut parts = line.split_whitespace();
-        let bad = |why: &str| Error::file(path, format!("line {}: {why}", no + 1));
+        let bad = |why: &str| Error::invalid("obj", format!("line {}: {why}", no + 1));
         match parts.next() {
             Some("v") => {
                 let c: Vec<f64> = parts
@@ -231,6 +263,12 @@ pub fn read_obj_triangles(path: &Path) -> Result<Vec<[DVec3; 3]>> {
                     .collect::<Result<_>>()?;
                 if idx.len() < 3 {
                     return Err(bad("a face needs three vertices"));
+                }
+                if tris.len() + idx.len() - 2 > crate::limits::MESH_TRIANGLES {
+                    return Err(bad(&format!(
+                        "more than {} triangles",
+                        crate::limits::MESH_TRIANGLES
+                    )));
                 }
                 for k in 1..idx.len() - 1 {
                     tris.push([verts[idx[0]], verts[idx[k]], verts[idx[k + 1]]]);

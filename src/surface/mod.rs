@@ -9,7 +9,7 @@
 mod mesh;
 mod shapes;
 
-pub use mesh::{Mesh, read_obj_triangles};
+pub use mesh::{Mesh, parse_obj_triangles, read_obj_triangles};
 pub use shapes::{Cylinder, Dome, Plane};
 
 use crate::error::{Error, Result};
@@ -110,10 +110,20 @@ impl Screen {
 
     /// Loads a mesh screen's OBJ file, relative to `base`.
     pub fn load(&mut self, base: &std::path::Path, field: &str) -> Result<()> {
+        self.load_with(field, |obj| Ok(base.join(obj)))
+    }
+
+    /// Loads a mesh screen's OBJ file from the path `resolve` gives its name; `resolve` may
+    /// refuse a name (the daemon reads meshes from its own directories only).
+    pub fn load_with(
+        &mut self,
+        field: &str,
+        resolve: impl FnOnce(&str) -> Result<std::path::PathBuf>,
+    ) -> Result<()> {
         if let Screen::Mesh { obj, loaded } = self {
-            let path = base.join(&*obj);
-            let mesh = Mesh::read_obj(&path)
-                .map_err(|e| Error::invalid(format!("{field}/obj"), e.to_string()))?;
+            let at = format!("{field}/obj");
+            let path = resolve(obj).map_err(|e| Error::invalid(&at, e.reason()))?;
+            let mesh = Mesh::read_obj(&path).map_err(|e| Error::invalid(&at, e.to_string()))?;
             *loaded = Some(std::sync::Arc::new(mesh));
         }
         Ok(())

@@ -213,6 +213,11 @@ impl TileScreen {
                 };
             }
             Edit::Smooth { iterations } => {
+                crate::limits::at_most(
+                    "iterations",
+                    *iterations,
+                    crate::limits::SMOOTH_ITERATIONS,
+                )?;
                 let (c, r, _) = grid_parts(self)?;
                 let Layout::Grid { features, .. } = &mut next.layout else {
                     unreachable!()

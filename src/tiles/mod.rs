@@ -208,6 +208,10 @@ impl TileScreen {
                         format!("needs at least 2×2 features, got {columns}×{rows}"),
                     ));
                 }
+                use crate::limits::{TILE_FEATURES, TILE_SIDE, at_most, product};
+                at_most("columns", *columns, TILE_SIDE)?;
+                at_most("rows", *rows, TILE_SIDE)?;
+                product("grid", *columns as u64, *rows as u64, TILE_FEATURES as u64)?;
                 if features.len() != columns * rows {
                     return Err(Error::invalid(
                         "features",
@@ -234,6 +238,11 @@ impl TileScreen {
                     .collect()
             }
             Layout::Soup { triangles } => {
+                crate::limits::at_most(
+                    "triangles",
+                    triangles.len(),
+                    crate::limits::TILE_TRIANGLES,
+                )?;
                 if triangles.is_empty() {
                     return Err(Error::invalid(
                         "triangles",

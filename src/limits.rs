@@ -1,0 +1,91 @@
+//! Every size, count and iteration a client or a file can set, in one place. A value past its
+//! limit is refused with an error naming the field, the value and the limit, before any work or
+//! allocation it would cause. README ("Limits") and `api/openapi.yaml` list the same numbers; a
+//! test reads them from here.
+
+use crate::error::{Error, Result};
+
+/// Projector pixels each way (a channel's `resolution`).
+pub const CHANNEL_SIDE: u32 = 16384;
+/// Channels in one rig.
+pub const CHANNELS: usize = 64;
+/// Bytes a channel's warp holds per projector pixel while it is computed and cached: the warp
+/// map and the wall points as f32 RGBA (16 + 16), the wall points in f64 (32), the blend
+/// weight (4), the effective map of an edited screen (16) and its f (4); rounded up.
+pub const WARP_BYTES_PER_PIXEL: u64 = 96;
+/// The daemon's default budget for the warps of all channels at once (`--memory-budget`).
+pub const MEMORY_BUDGET: u64 = 2 << 30;
+/// Knots of a splined lens model each way, and in all.
+pub const SPLINE_KNOTS_SIDE: u32 = 200;
+pub const SPLINE_KNOTS: u64 = 10_000;
+/// Features of a tile grid each way, and in all; triangles of a triangle soup.
+pub const TILE_SIDE: usize = 1025;
+pub const TILE_FEATURES: usize = 16_641;
+pub const TILE_TRIANGLES: usize = 32_768;
+/// Edits in one PATCH.
+pub const EDITS_PER_PATCH: usize = 1000;
+/// Iterations of one `smooth` edit.
+pub const SMOOTH_ITERATIONS: usize = 1000;
+/// Point correspondences in one calibration.
+pub const CALIBRATION_POINTS: usize = 20_000;
+/// Calibration proposals the daemon keeps; the oldest go first.
+pub const PROPOSALS: usize = 64;
+/// Nodes of an exported grid (PFM, Bourke mesh, MPCDI region).
+pub const EXPORT_NODES: usize = 1 << 22;
+/// Bytes of one export's body.
+pub const EXPORT_BYTES: usize = 256 << 20;
+/// Content canvas pixels each way.
+pub const CANVAS_SIDE: u32 = 65535;
+/// The smallest field of view a projection accepts, degrees: below it a content pixel is so
+/// small that pixel-sized tolerances ask for grids no export can hold.
+pub const MIN_FOV_DEG: f64 = 0.01;
+/// Zoom factor range of a view.
+pub const ZOOM: (f64, f64) = (1e-3, 1e3);
+/// Largest mesh screen file (and upload), bytes, and its triangles.
+pub const MESH_BYTES: u64 = 64 << 20;
+pub const MESH_TRIANGLES: usize = 4_000_000;
+/// Lines or values in a lens file, a PFM or a Bourke mesh, as a reader accepts them.
+pub const FILE_VALUES: u64 = 1 << 26;
+
+/// `value` when it is at most `limit`, else an error naming `field`.
+pub fn at_most<T: PartialOrd + std::fmt::Display>(field: &str, value: T, limit: T) -> Result<T> {
+    if value <= limit {
+        Ok(value)
+    } else {
+        Err(Error::invalid(
+            field,
+            format!("{value} is above the limit of {limit}"),
+        ))
+    }
+}
+
+/// `a × b`, refused (naming `field`) when it overflows or passes `limit`.
+pub fn product(field: &str, a: u64, b: u64, limit: u64) -> Result<u64> {
+    let p = a.checked_mul(b).ok_or_else(|| {
+        Error::invalid(field, format!("{a} × {b} overflows; the limit is {limit}"))
+    })?;
+    if p > limit {
+        return Err(Error::invalid(
+            field,
+            format!("{a} × {b} = {p} is above the limit of {limit}"),
+        ));
+    }
+    Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn products_overflow_into_errors_not_wraps() {
+        assert!(product("x", 1 << 63, 2, u64::MAX).is_err());
+        assert_eq!(product("x", 3, 4, 12).unwrap(), 12);
+        let e = product("/grid", 5, 4, 12).unwrap_err().to_string();
+        assert!(
+            e.contains("/grid") && e.contains("20") && e.contains("12"),
+            "{e}"
+        );
+        assert!(at_most("n", 5, 4).is_err());
+    }
+}
