@@ -4,35 +4,11 @@
 
 mod common;
 
-use omniwarp::server::client::{Client, Reply};
-use std::io::{BufRead, BufReader};
-use std::net::SocketAddr;
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use common::server::start;
 
-/// Starts `omniwarp serve` on port 0 and returns it with the address it printed.
-fn start(data: &Path, demo: bool) -> (Child, SocketAddr) {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_omniwarp"));
-    cmd.args(["serve", "--bind", "127.0.0.1:0", "--data"])
-        .arg(data)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null());
-    if demo {
-        cmd.arg("--demo");
-    }
-    let mut child = cmd.spawn().unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on http://")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .parse()
-        .unwrap();
-    (child, addr)
-}
+use omniwarp::server::client::{Client, Reply};
+use std::process::Command;
+use std::time::{Duration, Instant};
 
 fn patch(c: &mut Client, channel: &str, revision: u64, edits: serde_json::Value) -> Reply {
     let body = serde_json::json!({ "edits": edits }).to_string();

@@ -62,7 +62,14 @@ pub fn read_mesh(text: &str) -> Result<Mesh> {
     let [nx, ny] = dims[..] else {
         return Err(bad("line 2 must be `nx ny`".into()));
     };
-    let mut nodes = Vec::with_capacity(nx * ny);
+    let count = crate::limits::product(
+        "mesh",
+        nx as u64,
+        ny as u64,
+        crate::limits::EXPORT_NODES as u64,
+    )?;
+    // The count comes from the file: reserve no more than the text can hold.
+    let mut nodes = Vec::with_capacity((count as usize).min(text.len() / 10));
     for (n, line) in lines.enumerate() {
         let v: Vec<f64> = line
             .split_whitespace()
@@ -74,10 +81,9 @@ pub fn read_mesh(text: &str) -> Result<Mesh> {
             .map_err(|_| bad(format!("node {n}: not five numbers")))?;
         nodes.push(node);
     }
-    if nodes.len() != nx * ny {
+    if nodes.len() as u64 != count {
         return Err(bad(format!(
-            "{nx}×{ny} needs {} nodes, found {}",
-            nx * ny,
+            "{nx}×{ny} needs {count} nodes, found {}",
             nodes.len()
         )));
     }

@@ -213,9 +213,17 @@ pub fn read(bytes: &[u8]) -> Result<Package> {
         let mut f = z
             .by_name(name)
             .map_err(|e| bad(format!("member `{name}`: {e}")))?;
+        // A member's size comes from the archive: read no more than the export limit, so a
+        // small package cannot inflate into gigabytes.
+        let limit = crate::limits::EXPORT_BYTES as u64;
         let mut out = Vec::new();
-        f.read_to_end(&mut out)
+        (&mut f)
+            .take(limit + 1)
+            .read_to_end(&mut out)
             .map_err(|e| bad(format!("member `{name}`: {e}")))?;
+        if out.len() as u64 > limit {
+            return Err(bad(format!("member `{name}` is above {limit} bytes")));
+        }
         Ok(out)
     };
     let xml = String::from_utf8(member("mpcdi.xml")?)

@@ -162,7 +162,7 @@ fn matrix_shape(
     cols: usize,
     data: Vec<f64>,
 ) -> std::result::Result<(usize, usize, Vec<f64>), String> {
-    if data.len() != rows * cols {
+    if rows.checked_mul(cols) != Some(data.len()) {
         return Err(format!(
             "{key} is {rows}×{cols} but holds {} numbers",
             data.len()
@@ -254,7 +254,11 @@ pub fn read_cameramodel(path: &Path) -> Result<CameraModel> {
     let lens = Lens::new(model, intrinsics).map_err(|e| bad(path, e))?;
     let imager_size = match numbers("imagersize")? {
         None => None,
-        Some(v) if v.len() == 2 && v.iter().all(|x| *x >= 1.0 && x.fract() == 0.0) => {
+        Some(v)
+            if v.len() == 2
+                && v.iter()
+                    .all(|x| (1.0..=f64::from(u32::MAX)).contains(x) && x.fract() == 0.0) =>
+        {
             Some([v[0] as u32, v[1] as u32])
         }
         Some(_) => return Err(bad(path, "'imagersize' must be two positive whole numbers")),

@@ -68,7 +68,11 @@ pub async fn run_job<T: Send + 'static>(
     s: &Arc<AppState>,
     work: impl FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
 ) -> Result<T, ApiError> {
-    let permit = s.workers.try_acquire().map_err(|_| ApiError::Busy)?;
+    let permit = s
+        .workers
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ApiError::Busy)?;
     run_with(s, permit, work).await
 }
 
@@ -82,22 +86,25 @@ pub async fn run_write<T: Send + 'static>(
     s: &Arc<AppState>,
     work: impl FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
 ) -> Result<T, ApiError> {
-    let permit = tokio::time::timeout(WRITE_WAIT, s.workers.acquire())
+    let permit = tokio::time::timeout(WRITE_WAIT, s.workers.clone().acquire_owned())
         .await
         .map_err(|_| ApiError::Busy)?
         .map_err(|_| ApiError::Busy)?;
     run_with(s, permit, work).await
 }
 
+/// The permit moves into the blocking task: a worker counts as busy until its work has
+/// really stopped, not merely until the client left.
 async fn run_with<T: Send + 'static>(
     s: &Arc<AppState>,
-    _permit: tokio::sync::SemaphorePermit<'_>,
+    permit: tokio::sync::OwnedSemaphorePermit,
     work: impl FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
 ) -> Result<T, ApiError> {
     let flag = Arc::new(AtomicBool::new(false));
     let _guard = CancelOnDrop(flag.clone());
     let state = s.clone();
     tokio::task::spawn_blocking(move || {
+        let _permit = permit;
         let out = work(&flag);
         let counter = if flag.load(Ordering::Relaxed) {
             &state.jobs_cancelled

@@ -69,7 +69,7 @@ pub struct AppState {
     /// Flips to true when the server shuts down; event streams end on it.
     pub stopping: watch::Sender<bool>,
     /// Bounds the expensive work running at once, so it never starves the API.
-    pub workers: Semaphore,
+    pub workers: Arc<Semaphore>,
     /// Bounds the large responses in flight (see [`STREAMS`]).
     pub streams: Arc<Semaphore>,
     /// Geometric warps and blend weights by channel and a hash of what they are computed from.
@@ -101,7 +101,7 @@ impl AppState {
             bound: OnceLock::new(),
             events: broadcast::channel(256).0,
             stopping: watch::channel(false).0,
-            workers: Semaphore::new(WORKERS),
+            workers: Arc::new(Semaphore::new(WORKERS)),
             streams: Arc::new(Semaphore::new(STREAMS)),
             warps: Mutex::new(HashMap::new()),
             computed: Mutex::new(HashMap::new()),

@@ -5,7 +5,10 @@ use axum::http::{HeaderMap, Request, StatusCode, header};
 use http_body_util::BodyExt;
 use omniwarp::rig::RigDoc;
 use omniwarp::server::{AppState, Store, router};
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
 use std::path::Path;
+use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
 use tower::ServiceExt;
 
@@ -66,4 +69,33 @@ pub fn write(method: &str, uri: &str, if_match: Option<u64>, body: String) -> Re
 
 pub fn json(bytes: &[u8]) -> serde_json::Value {
     serde_json::from_slice(bytes).unwrap()
+}
+
+/// Starts `omniwarp serve` on port 0 and returns it with the address it printed.
+pub fn start(data: &Path, demo: bool) -> (Child, SocketAddr) {
+    start_with(data, demo, &[])
+}
+
+/// [`start`] with more arguments for `serve`.
+pub fn start_with(data: &Path, demo: bool, extra: &[&str]) -> (Child, SocketAddr) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_omniwarp"));
+    cmd.args(["serve", "--bind", "127.0.0.1:0", "--data"])
+        .arg(data)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null());
+    if demo {
+        cmd.arg("--demo");
+    }
+    cmd.args(extra);
+    let mut child = cmd.spawn().unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .parse()
+        .unwrap();
+    (child, addr)
 }
