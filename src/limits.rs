@@ -28,6 +28,8 @@ pub const EDITS_PER_PATCH: usize = 1000;
 pub const SMOOTH_ITERATIONS: usize = 1000;
 /// Point correspondences in one calibration.
 pub const CALIBRATION_POINTS: usize = 20_000;
+/// How far from the origin a world point may be, metres (rigs and calibration points).
+pub const WORLD_EXTENT: f64 = 1e5;
 /// Calibration proposals the daemon keeps; the oldest go first.
 pub const PROPOSALS: usize = 64;
 /// Nodes of an exported grid (PFM, Bourke mesh, MPCDI region).

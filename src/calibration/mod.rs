@@ -172,6 +172,23 @@ impl Problem {
                     "holds a non-finite number",
                 ));
             }
+            // Far outside the image or the room, a point is a typing error, and its squares
+            // overflow the solver.
+            let [x, y] = c.pixel;
+            let (fw, fh) = (f64::from(w), f64::from(h));
+            if !(-fw..=2.0 * fw).contains(&x) || !(-fh..=2.0 * fh).contains(&y) {
+                return Err(Error::invalid(
+                    format!("points[{n}].pixel"),
+                    format!("({x}, {y}) is far outside the {w}×{h} image"),
+                ));
+            }
+            let far = crate::limits::WORLD_EXTENT;
+            if c.world.iter().any(|v| v.abs() > far) {
+                return Err(Error::invalid(
+                    format!("points[{n}].world"),
+                    format!("is more than the limit of {far} m from the origin"),
+                ));
+            }
         }
         if self.intrinsics_fixed && self.lens.is_none() {
             return Err(Error::invalid(
@@ -310,6 +327,12 @@ pub fn calibrate_unless(
         }
     }
     let (fit, _) = best.expect("at least one model was fitted");
+    if !fit.rms.is_finite() || fit.sigma.iter().any(|(_, v)| !v.is_finite()) {
+        return Err(Error::invalid(
+            "points",
+            "the solve did not reach finite values; check the points for outliers",
+        ));
+    }
     let warnings = fit.warnings();
     Ok(Calibration {
         fit,

@@ -138,8 +138,18 @@ pub fn rodrigues(r: DVec3) -> DMat3 {
     DMat3::from_axis_angle(r / theta, theta)
 }
 
+/// A finite vector within [`crate::limits::WORLD_EXTENT`] of the origin in each coordinate
+/// (points in metres; directions are far inside it).
 fn vec3(field: &str, v: [f64; 3]) -> Result<DVec3> {
-    crate::surface::finite3(field, DVec3::from_array(v))
+    let v = crate::surface::finite3(field, DVec3::from_array(v))?;
+    let far = crate::limits::WORLD_EXTENT;
+    if v.abs().max_element() > far {
+        return Err(Error::invalid(
+            field,
+            format!("is more than the limit of {far} m from the origin"),
+        ));
+    }
+    Ok(v)
 }
 
 impl Rig {
