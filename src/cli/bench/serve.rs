@@ -1,7 +1,9 @@
 //! `omniwarp bench serve`: the daemon under load, over real HTTP on loopback. Many clients edit
-//! tile screens with `If-Match` (retrying on 412, as a console would), while one client renders
-//! full-size previews of an edited channel. Reports edits per second, edit latency (first attempt
-//! to acknowledgement) and render latency, with and without the edits.
+//! tile screens with `If-Match` (retrying on 412 and 503, as a console would), while one client
+//! renders full-size previews of an edited channel. Reports edits per second, edit latency (first
+//! attempt to acknowledgement) and render latency, with and without the edits; then the latency
+//! of health and of a small edit while clients keep every worker busy and while 1,000 slow
+//! connections are open; then the peak memory of the largest rig the default budget allows.
 
 use anyhow::{Result, bail};
 use clap::Args;
@@ -110,6 +112,8 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
                                 revision = r.json()["current_revision"].as_u64().unwrap_or(revision);
                                 std::thread::sleep(Duration::from_micros((k as u64 * 37 + attempts) % 500));
                             }
+                            // Every worker busy for longer than a write waits: back off.
+                            503 => std::thread::sleep(Duration::from_millis(20)),
                             s => bail!("client {k}: status {s}"),
                         }
                     }
@@ -160,7 +164,161 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         percentile(&mut busy, 0.5),
         percentile(&mut busy, 0.99)
     );
+    hostile(addr)?;
+    let _ = stop.send(());
+    rt.block_on(server)??;
+    largest_rig()?;
+    Ok(())
+}
+
+/// `samples` timings of `f`, milliseconds, p50 and p99.
+fn timed(samples: usize, mut f: impl FnMut() -> Result<()>) -> Result<(f64, f64)> {
+    let mut t = Vec::with_capacity(samples);
+    for _ in 0..samples {
+        let start = Instant::now();
+        f()?;
+        t.push(start.elapsed().as_secs_f64() * 1e3);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok((percentile(&mut t, 0.5), percentile(&mut t, 0.99)))
+}
+
+/// Health and a one-feature edit (retried on 412 and 503), timed on fresh connections.
+fn probes(addr: SocketAddr, what: &str) -> Result<()> {
+    let (h50, h99) = timed(50, || {
+        let r = Client::new(addr, None).get("/v1/health")?;
+        if r.status != 200 {
+            bail!("health: status {}", r.status);
+        }
+        Ok(())
+    })?;
+    let (e50, e99) = timed(20, || {
+        let mut c = Client::new(addr, None);
+        loop {
+            let rev = c.get("/v1/channels/left/tiles")?.revision().unwrap_or(1);
+            let body = r#"{"edits": [{"op": "set_feature", "column": 3, "row": 3, "f": 0.7}]}"#;
+            let tag = format!("\"{rev}\"");
+            let r = c.send(
+                "PATCH",
+                "/v1/channels/left/tiles",
+                &[("If-Match", &tag)],
+                body.as_bytes(),
+            )?;
+            match r.status {
+                200 => return Ok(()),
+                412 | 503 => continue,
+                s => bail!("edit: status {s}"),
+            }
+        }
+    })?;
+    outln!(
+        "{what}: health p50 {h50:.1} ms, p99 {h99:.1} ms; small edit p50 {e50:.1} ms, p99 {e99:.1} ms"
+    );
+    Ok(())
+}
+
+/// Health and edits while the heavy routes are saturated, then with 1,000 slow connections.
+fn hostile(addr: SocketAddr) -> Result<()> {
+    let saturating = Arc::new(AtomicBool::new(true));
+    let busy: Vec<_> = (0..6)
+        .map(|k| {
+            let flag = saturating.clone();
+            std::thread::spawn(move || {
+                let (mut served, mut refused) = (0u64, 0u64);
+                let mut c = Client::new(addr, None);
+                let path = format!("/v1/channels/{}/render?scale=1", ["centre", "right"][k % 2]);
+                while flag.load(Ordering::Relaxed) {
+                    match c.get(&path).map(|r| r.status) {
+                        Ok(200) => served += 1,
+                        _ => refused += 1,
+                    }
+                }
+                (served, refused)
+            })
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    probes(addr, "6 clients rendering 1080p previews without pause")?;
+    saturating.store(false, Ordering::Relaxed);
+    let (served, refused) = busy
+        .into_iter()
+        .map(|t| t.join().expect("render thread"))
+        .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    outln!("  (their renders: {served} served, {refused} answered 503)");
+
+    let mut slow = Vec::new();
+    for i in 0..1000 {
+        let mut c = std::net::TcpStream::connect(addr)?;
+        std::io::Write::write_all(
+            &mut c,
+            format!("GET /v1/health HTTP/1.1\r\nX-Slow: {i}\r\n").as_bytes(),
+        )?;
+        slow.push(c);
+    }
+    probes(addr, "1,000 connections sending headers that never end")?;
+    drop(slow);
+    Ok(())
+}
+
+/// The demo rig with its three projectors at 4096×1820: as much as the default memory budget
+/// admits. Computes every channel's warp and reports the process's peak resident memory.
+fn largest_rig() -> Result<()> {
+    let mut doc: omniwarp::rig::RigDoc = serde_json::from_str(omniwarp::rig::DEMO_RIG)?;
+    let (w, h) = (4096u32, 1820u32);
+    for c in &mut doc.channels {
+        let (sx, sy) = (
+            f64::from(w) / f64::from(c.resolution[0]),
+            f64::from(h) / f64::from(c.resolution[1]),
+        );
+        let i = &mut c.lens.intrinsics;
+        i[0] *= sx;
+        i[1] *= sy;
+        i[2] = (i[2] + 0.5) * sx - 0.5;
+        i[3] = (i[3] + 0.5) * sy - 0.5;
+        c.resolution = [w, h];
+    }
+    let rig = omniwarp::rig::Rig::from_doc(doc.clone())?;
+    rig.check_budget(omniwarp::limits::MEMORY_BUDGET)?;
+    let dir = tempfile::tempdir()?;
+    let state = AppState::new(
+        Store::open(Some(dir.path().to_path_buf()), Some(doc))?,
+        None,
+    );
+    let rt = tokio::runtime::Runtime::new()?;
+    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
+    let addr = listener.local_addr()?;
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = rt.spawn(launch(listener, state, async {
+        let _ = stopped.await;
+    }));
+    let before = peak_rss_mib();
+    let t = Instant::now();
+    for ch in ["left", "centre", "right"] {
+        let r = Client::new(addr, None).get(&format!("/v1/channels/{ch}/blend.png"))?;
+        if r.status != 200 {
+            bail!("largest rig, {ch}: status {}", r.status);
+        }
+    }
+    outln!(
+        "largest rig the default budget admits (3 × {w}×{h}, {} MiB by the estimate): warps in {:.1} s, peak RSS {} MiB (before: {} MiB)",
+        rig.warp_bytes() >> 20,
+        t.elapsed().as_secs_f64(),
+        peak_rss_mib(),
+        before
+    );
     let _ = stop.send(());
     rt.block_on(server)??;
     Ok(())
+}
+
+/// The process's peak resident set (VmHWM), MiB; 0 where /proc is not there.
+fn peak_rss_mib() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb >> 10)
 }
