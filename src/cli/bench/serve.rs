@@ -52,23 +52,12 @@ fn renders(addr: SocketAddr, channel: &str, n: usize) -> Result<Vec<f64>> {
 }
 
 pub fn run(a: ServeBenchArgs) -> Result<()> {
-    let dir = tempfile::tempdir()?;
-    let doc = serde_json::from_str(omniwarp::rig::DEMO_RIG)?;
-    let state = AppState::new(
-        Store::open(Some(dir.path().to_path_buf()), Some(doc))?,
-        None,
-    );
-    let rt = tokio::runtime::Runtime::new()?;
-    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
-    let addr = listener.local_addr()?;
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = rt.spawn(launch(listener, state, async {
-        let _ = stopped.await;
-    }));
+    let daemon = Daemon::start(serde_json::from_str(omniwarp::rig::DEMO_RIG)?)?;
+    let (addr, dir) = (daemon.addr, daemon.dir.path());
     let channels = ["left", "centre", "right"];
     outln!(
         "demo rig (3 × 1920×1080), data on {}; {} clients × {} tile edits, renders of `centre` at 1920×1080",
-        dir.path().display(),
+        dir.display(),
         a.clients,
         a.edits
     );
@@ -165,10 +154,48 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
         percentile(&mut busy, 0.99)
     );
     hostile(addr)?;
-    let _ = stop.send(());
-    rt.block_on(server)??;
+    daemon.stop()?;
     largest_rig()?;
     Ok(())
+}
+
+/// The daemon on a free loopback port, in this process, with its data in a temporary directory.
+struct Daemon {
+    addr: SocketAddr,
+    dir: tempfile::TempDir,
+    rt: tokio::runtime::Runtime,
+    stop: tokio::sync::oneshot::Sender<()>,
+    server: tokio::task::JoinHandle<std::io::Result<()>>,
+}
+
+impl Daemon {
+    fn start(doc: omniwarp::rig::RigDoc) -> Result<Daemon> {
+        let dir = tempfile::tempdir()?;
+        let state = AppState::new(
+            Store::open(Some(dir.path().to_path_buf()), Some(doc))?,
+            None,
+        );
+        let rt = tokio::runtime::Runtime::new()?;
+        let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
+        let addr = listener.local_addr()?;
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let server = rt.spawn(launch(listener, state, async {
+            let _ = stopped.await;
+        }));
+        Ok(Daemon {
+            addr,
+            dir,
+            rt,
+            stop,
+            server,
+        })
+    }
+
+    fn stop(self) -> Result<()> {
+        let _ = self.stop.send(());
+        self.rt.block_on(self.server)??;
+        Ok(())
+    }
 }
 
 /// `samples` timings of `f`, milliseconds, p50 and p99.
@@ -279,18 +306,8 @@ fn largest_rig() -> Result<()> {
     }
     let rig = omniwarp::rig::Rig::from_doc(doc.clone())?;
     rig.check_budget(omniwarp::limits::MEMORY_BUDGET)?;
-    let dir = tempfile::tempdir()?;
-    let state = AppState::new(
-        Store::open(Some(dir.path().to_path_buf()), Some(doc))?,
-        None,
-    );
-    let rt = tokio::runtime::Runtime::new()?;
-    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
-    let addr = listener.local_addr()?;
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = rt.spawn(launch(listener, state, async {
-        let _ = stopped.await;
-    }));
+    let daemon = Daemon::start(doc)?;
+    let addr = daemon.addr;
     let before = peak_rss_mib();
     let t = Instant::now();
     for ch in ["left", "centre", "right"] {
@@ -306,9 +323,7 @@ fn largest_rig() -> Result<()> {
         peak_rss_mib(),
         before
     );
-    let _ = stop.send(());
-    rt.block_on(server)??;
-    Ok(())
+    daemon.stop()
 }
 
 /// The process's peak resident set (VmHWM), MiB; 0 where /proc is not there.
