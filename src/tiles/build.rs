@@ -74,7 +74,7 @@ pub fn grid_of(
     rows: usize,
     dir: impl Fn(f64, f64) -> (Option<DVec3>, f64),
 ) -> Result<TileScreen> {
-    if columns < 2 || rows < 2 || columns * rows > 1 << 22 {
+    if columns < 2 || rows < 2 || columns.checked_mul(rows).is_none_or(|n| n > 1 << 22) {
         return Err(Error::invalid(
             "grid",
             format!("must be between 2×2 and 4M features, got {columns}×{rows}"),

@@ -288,7 +288,8 @@ fn hostile(addr: SocketAddr) -> Result<()> {
 }
 
 /// The demo rig with its three projectors at 4096×1820: as much as the default memory budget
-/// admits. Computes every channel's warp and reports the process's peak resident memory.
+/// admits. A daemon of its own (this binary, `serve --data`) computes every channel's warp and
+/// blend; its peak resident memory is read from /proc when it is done.
 fn largest_rig() -> Result<()> {
     let mut doc: omniwarp::rig::RigDoc = serde_json::from_str(omniwarp::rig::DEMO_RIG)?;
     let (w, h) = (4096u32, 1820u32);
@@ -306,29 +307,50 @@ fn largest_rig() -> Result<()> {
     }
     let rig = omniwarp::rig::Rig::from_doc(doc.clone())?;
     rig.check_budget(omniwarp::limits::MEMORY_BUDGET)?;
-    let daemon = Daemon::start(doc)?;
-    let addr = daemon.addr;
-    let before = peak_rss_mib();
-    let t = Instant::now();
-    for ch in ["left", "centre", "right"] {
-        let r = Client::new(addr, None).get(&format!("/v1/channels/{ch}/blend.png"))?;
-        if r.status != 200 {
-            bail!("largest rig, {ch}: status {}", r.status);
+    let dir = tempfile::tempdir()?;
+    let saved = serde_json::json!({"revision": 1, "rig": doc});
+    std::fs::write(dir.path().join("rig.json"), saved.to_string())?;
+    let mut child = std::process::Command::new(std::env::current_exe()?)
+        .args(["serve", "--bind", "127.0.0.1:0", "--data"])
+        .arg(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()?;
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().expect("piped")),
+        &mut line,
+    )?;
+    let measured = (|| -> Result<(f64, u64, u64)> {
+        let addr: SocketAddr = line
+            .trim()
+            .strip_prefix("listening on http://")
+            .ok_or_else(|| anyhow::anyhow!("the daemon said `{line}`"))?
+            .parse()?;
+        let before = peak_rss_mib(child.id());
+        let t = Instant::now();
+        for ch in ["left", "centre", "right"] {
+            let r = Client::new(addr, None).get(&format!("/v1/channels/{ch}/blend.png"))?;
+            if r.status != 200 {
+                bail!("largest rig, {ch}: status {}", r.status);
+            }
         }
-    }
+        Ok((t.elapsed().as_secs_f64(), before, peak_rss_mib(child.id())))
+    })();
+    let _ = child.kill();
+    let _ = child.wait();
+    let (took, before, peak) = measured?;
     outln!(
-        "largest rig the default budget admits (3 × {w}×{h}, {} MiB by the estimate): warps in {:.1} s, peak RSS {} MiB (before: {} MiB)",
+        "largest rig the default budget admits (3 × {w}×{h}, {} MiB by the estimate): warps in \
+         {took:.1} s; the daemon's peak RSS {peak} MiB (at start {before} MiB)",
         rig.warp_bytes() >> 20,
-        t.elapsed().as_secs_f64(),
-        peak_rss_mib(),
-        before
     );
-    daemon.stop()
+    Ok(())
 }
 
-/// The process's peak resident set (VmHWM), MiB; 0 where /proc is not there.
-fn peak_rss_mib() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
+/// Process `pid`'s peak resident set (VmHWM), MiB; 0 where /proc is not there.
+fn peak_rss_mib(pid: u32) -> u64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
         .ok()
         .and_then(|s| {
             s.lines()
