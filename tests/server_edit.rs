@@ -860,3 +860,44 @@ async fn put_tiles_replaces_the_screen_with_revisions_and_validation() {
     let (_, h, _) = call(&s, get("/v1/channels/left/tiles")).await;
     assert_eq!(h[header::ETAG], "\"3\"");
 }
+
+/// The README walkthrough's `smooth` on an untouched screen (issue 14): the demo rig's right
+/// projector ends at the +135° wall end, where features off the wall hold no direction.
+/// Smoothing averages valid features among valid neighbours only and holds the wall's edge, so
+/// no feature moves by more than a fraction of a degree (before: feature (28, 14) went from
+/// φ 134.8° to 66.6°).
+#[tokio::test]
+async fn smoothing_an_untouched_screen_keeps_the_wall_end() {
+    let demo = common::server::state_with(
+        None,
+        None,
+        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+    );
+    let features = |body: &[u8]| -> Vec<serde_json::Value> {
+        json(body)["tiles"]["layout"]["features"]
+            .as_array()
+            .unwrap()
+            .clone()
+    };
+    let (_, _, before) = call(&demo, get("/v1/channels/right/tiles")).await;
+    let patch = serde_json::json!({"edits": [{"op": "smooth", "iterations": 1}]}).to_string();
+    let (st, _, _) = call(
+        &demo,
+        write("PATCH", "/v1/channels/right/tiles", Some(1), patch),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK);
+    let (_, _, after) = call(&demo, get("/v1/channels/right/tiles")).await;
+    let (before, after) = (features(&before), features(&after));
+    let invalid = before.iter().filter(|f| f["valid"] == false).count();
+    assert!(invalid > 0, "the screen reaches past the wall end");
+    let mut worst = 0.0f64;
+    for (a, b) in before.iter().zip(&after) {
+        assert_eq!(a["valid"], b["valid"]);
+        for k in ["phi", "theta"] {
+            worst = worst.max((a[k].as_f64().unwrap() - b[k].as_f64().unwrap()).abs());
+        }
+    }
+    // Measured: 0.079°.
+    assert!(worst < 0.5, "a feature moved {worst}°");
+}

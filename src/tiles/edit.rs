@@ -43,7 +43,8 @@ pub enum Edit {
         at: usize,
     },
     /// Replaces every inner feature's angles, scale and f by the mean of its four neighbours,
-    /// `iterations` times; the border stays, so the screen keeps its extent.
+    /// `iterations` times; the border stays, so the screen keeps its extent, and so do invalid
+    /// features and the valid ones beside them (the edge of what the screen shows).
     Smooth {
         iterations: usize,
     },
@@ -233,6 +234,11 @@ impl TileScreen {
                                 before[(l - 1) * c + k],
                                 before[(l + 1) * c + k],
                             ];
+                            // Invalid features hold no direction (φ = θ = 0), and a valid one
+                            // beside them is the wall's edge: both stay where they are.
+                            if !me.valid || n.iter().any(|f| !f.valid) {
+                                continue;
+                            }
                             let mean = |g: fn(&Feature) -> f64| n.iter().map(g).sum::<f64>() / 4.0;
                             let phi =
                                 n.iter().map(|v| unwrap_deg(v.phi, me.phi)).sum::<f64>() / 4.0;
