@@ -734,7 +734,7 @@ async fn s2_a_cross_site_form_post_is_refused_and_only_allowed_origins_pass_pref
 
 /// PATCH one feature of channel `left` to `theta`, based on `revision`.
 async fn set_theta(s: &Arc<AppState>, revision: u64, theta: f64) -> StatusCode {
-    let edit = serde_json::json!({"edits": [{"op": "set_feature", "column": 5, "row": 5, "theta": theta}]});
+    let edit = serde_json::json!({"edits": [{"op": "set_feature", "column": 16, "row": 9, "theta": theta}]});
     call(
         s,
         write(
@@ -752,8 +752,8 @@ async fn set_theta(s: &Arc<AppState>, revision: u64, theta: f64) -> StatusCode {
 async fn d1_a_revision_number_reused_after_a_fallback_serves_its_own_warp() {
     let dir = tempfile::tempdir().unwrap();
     let s = state(Some(dir.path()), None);
-    assert_eq!(set_theta(&s, 1, 1.0).await, StatusCode::OK);
-    assert_eq!(set_theta(&s, 2, 2.0).await, StatusCode::OK);
+    assert_eq!(set_theta(&s, 1, 0.3).await, StatusCode::OK);
+    assert_eq!(set_theta(&s, 2, 0.6).await, StatusCode::OK);
     let (_, h, lost) = call(&s, get("/v1/channels/left/warp.exr")).await;
     let lost_tag = h[header::ETAG].clone();
     drop(s);
@@ -761,7 +761,7 @@ async fn d1_a_revision_number_reused_after_a_fallback_serves_its_own_warp() {
     // new revision 3.
     std::fs::write(dir.path().join("channels/left.json"), "{ torn").unwrap();
     let s = state(Some(dir.path()), None);
-    assert_eq!(set_theta(&s, 2, -4.0).await, StatusCode::OK);
+    assert_eq!(set_theta(&s, 2, -0.6).await, StatusCode::OK);
     let (_, h, now) = call(&s, get("/v1/channels/left/warp.exr")).await;
     assert!(h[header::ETAG].to_str().unwrap().ends_with("-1.3\""));
     assert_ne!(

@@ -6,6 +6,7 @@ use super::build::{Source, from_source, grid_of};
 use super::raster::unwrap_deg;
 use super::{Feature, Layout, TileScreen};
 use crate::error::{Error, Result};
+use glam::DVec3;
 
 /// One change to a tile screen. As JSON (the daemon's PATCH), `"op"` names it in snake case:
 /// `{"op": "set_feature", "column": 3, "row": 0, "phi": 12.5}`; ranges are `[first, last]`.
@@ -261,6 +262,91 @@ impl TileScreen {
             }
         }
         next.validate()?;
+        // Edits that move features can fold the content over while the screen positions stay
+        // put; insertions take midpoints and a reset resamples, which cannot.
+        if matches!(
+            edit,
+            Edit::SetFeature { .. } | Edit::SetRegion { .. } | Edit::Smooth { .. }
+        ) {
+            refuse_content_folds(self, &next, edit)?;
+        }
         Ok(next)
     }
+}
+
+/// The direction a feature shows (its angles times its scale).
+fn shown(f: &Feature) -> DVec3 {
+    let (p, t) = (
+        (f.phi * f.scale).to_radians(),
+        (f.theta * f.scale).to_radians(),
+    );
+    DVec3::new(t.cos() * p.sin(), t.sin(), -t.cos() * p.cos())
+}
+
+/// Which way round a triangle's content directions run, seen from outside the unit sphere: 1 or
+/// −1, and 0 where a corner is invalid or the triangle is too small to tell (a row at a pole;
+/// the screen-space check already refuses degenerate tiles).
+fn content_turn(t: &[Feature; 3]) -> i8 {
+    if !t.iter().all(|f| f.valid) {
+        return 0;
+    }
+    let [a, b, c] = t.map(|f| shown(&f));
+    let s = (b - a).cross(c - a).dot(a + b + c);
+    if s.abs() < 1e-12 {
+        0
+    } else if s > 0.0 {
+        1
+    } else {
+        -1
+    }
+}
+
+/// Refuses `next` if the edit turned a triangle against the way the screen's content runs (a
+/// fold in content space, which screen positions alone do not show). Naming: the feature a
+/// `set_feature` moved, else the tile.
+fn refuse_content_folds(before: &TileScreen, next: &TileScreen, edit: &Edit) -> Result<()> {
+    let turns = |t: &TileScreen| -> Vec<(i8, String)> {
+        t.triangles()
+            .iter()
+            .map(|(t, name)| (content_turn(t), name.clone()))
+            .collect()
+    };
+    let (was, now) = (turns(before), turns(next));
+    let majority = was.iter().map(|(t, _)| i64::from(*t)).sum::<i64>().signum() as i8;
+    if majority == 0 {
+        return Ok(());
+    }
+    let against = |v: &[(i8, String)]| v.iter().filter(|(t, _)| *t == -majority).count();
+    let folded = if was.len() == now.len() {
+        now.iter()
+            .zip(&was)
+            .find(|((t, _), (old, _))| *t == -majority && *old != -majority)
+            .map(|((_, name), _)| name.clone())
+    } else if against(&now) > against(&was) {
+        now.iter()
+            .find(|(t, _)| *t == -majority)
+            .map(|(_, name)| name.clone())
+    } else {
+        None
+    };
+    let Some(tile) = folded else {
+        return Ok(());
+    };
+    let (name, what) = match (edit, &next.layout) {
+        (Edit::SetFeature { column, row, .. }, Layout::Grid { columns, .. }) => (
+            format!(
+                "features[{}] (column {column}, row {row})",
+                row * columns + column
+            ),
+            format!("folds {tile} over in content space"),
+        ),
+        _ => (
+            tile,
+            "is folded over in content space (its directions run the wrong way round)".into(),
+        ),
+    };
+    Err(Error::invalid(
+        name,
+        format!("{what}: a neighbour would show content from the other side"),
+    ))
 }
