@@ -385,17 +385,27 @@ fn edits_change_what_they_say_and_refuse_the_rest() {
     );
     let small = build::from_source(&src, 2, 2).unwrap();
     assert!(small.edit(&Edit::RemoveRow { at: 0 }).is_err());
-    // Smoothing pulls a spike back; reset restores the source exactly.
-    let spiky = t
-        .edit(&Edit::SetFeature {
+    // A spike past the neighbour folds the content over and is refused, naming the feature; one
+    // short of it is taken, smoothing pulls it back, and reset restores the source exactly.
+    let spike = |phi: f64| {
+        t.edit(&Edit::SetFeature {
             column: 2,
             row: 1,
-            phi: Some(60.0),
+            phi: Some(phi),
             theta: None,
             scale: None,
             f: None,
         })
-        .unwrap();
+    };
+    let folded = spike(60.0).unwrap_err().to_string();
+    assert!(
+        folded.contains("features[7]") && folded.contains("content space"),
+        "{folded}"
+    );
+    let Layout::Grid { features, .. } = &t.layout else {
+        panic!()
+    };
+    let spiky = spike(0.6 * features[8].phi).unwrap();
     let smooth = spiky.edit(&Edit::Smooth { iterations: 1 }).unwrap();
     let Layout::Grid { features, .. } = &smooth.layout else {
         panic!()
