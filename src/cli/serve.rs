@@ -107,7 +107,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
             initial,
             reset: a.reset,
             memory_budget: a.memory_budget,
-            assets: a.assets.clone(),
+            assets: a.assets,
         },
     )
     .map_err(|e| anyhow::anyhow!("--data: {e}"))?;
@@ -118,7 +118,6 @@ pub fn run(a: ServeArgs) -> Result<()> {
             memory_budget: a.memory_budget,
             allow_hosts: a.allow_hosts,
             allow_origins: a.allow_origins,
-            assets: a.assets,
         },
     );
     let rt = tokio::runtime::Builder::new_multi_thread()

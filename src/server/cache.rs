@@ -1,5 +1,5 @@
 //! What the daemon keeps computed between requests: per channel the geometric warp and blend
-//! weights (keyed by rig revision) and the warp as shown (keyed by rig and tiles revision), and
+//! weights and the warp as shown (each keyed by a hash of its inputs, see `jobs::keys`), and
 //! the GPU handle previews use. Plain data: the functions that fill it live in `jobs`.
 
 use crate::normalmap::NormalMap;

@@ -121,15 +121,6 @@ fn is_json(ct: Option<&str>) -> bool {
         .is_some_and(|m| m.trim().eq_ignore_ascii_case("application/json"))
 }
 
-/// The largest body a request may have: meshes are uploads of their own size.
-fn body_limit(req: &Request) -> usize {
-    if req.uri().path().starts_with("/v1/meshes/") {
-        crate::limits::MESH_BYTES as usize
-    } else {
-        MAX_BODY
-    }
-}
-
 /// Host, Origin, content type, sizes and CORS; then the body, read whole.
 pub async fn guard(
     State(s): State<Arc<AppState>>,
@@ -179,7 +170,13 @@ pub async fn guard(
     if req.method() == Method::OPTIONS {
         return Ok(preflight(cors));
     }
-    let limit = body_limit(&req);
+    // Mesh uploads are OBJ text of their own size; every other body is JSON.
+    let is_mesh = req.uri().path().starts_with("/v1/meshes/");
+    let limit = if is_mesh {
+        crate::limits::MESH_BYTES as usize
+    } else {
+        MAX_BODY
+    };
     let declared = h
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
@@ -188,7 +185,6 @@ pub async fn guard(
     }
     // A body of unknown length (chunked) counts as one; an empty one does not.
     let has_body = axum::body::HttpBody::size_hint(req.body()).exact() != Some(0);
-    let is_mesh = req.uri().path().starts_with("/v1/meshes/");
     if has_body && !is_mesh && !is_json(header_str(h, header::CONTENT_TYPE)?) {
         return Err(ApiError::refused(
             StatusCode::UNSUPPORTED_MEDIA_TYPE,

@@ -130,8 +130,19 @@ fn cancelled(cancel: &AtomicBool) -> Result<(), ApiError> {
     }
 }
 
-/// The channel's current state and its computed warp (from the cache, or computed now).
-pub async fn job(s: &Arc<AppState>, id: &str) -> Result<Job, ApiError> {
+/// What a channel's outputs are computed from right now, with its cache keys (see [`keys`]).
+pub struct Inputs {
+    pub rig: Arc<Rig>,
+    pub rig_revision: u64,
+    pub tiles: Option<crate::tiles::TileScreen>,
+    pub tiles_revision: u64,
+    pub canvas: Canvas,
+    pub geometry_key: u64,
+    pub key: u64,
+}
+
+/// The channel's current state, read once under its lock.
+pub async fn inputs(s: &Arc<AppState>, id: &str) -> Result<Inputs, ApiError> {
     let (rig, rig_revision) = s.store.snapshot();
     let data = s
         .store
@@ -146,6 +157,33 @@ pub async fn job(s: &Arc<AppState>, id: &str) -> Result<Job, ApiError> {
         )
     };
     let (geometry_key, key) = keys(&rig, id, &tiles);
+    Ok(Inputs {
+        rig,
+        rig_revision,
+        tiles,
+        tiles_revision,
+        canvas,
+        geometry_key,
+        key,
+    })
+}
+
+/// The channel's current state and its computed warp (from the cache, or computed now).
+pub async fn job(s: &Arc<AppState>, id: &str) -> Result<Job, ApiError> {
+    job_from(s, id, inputs(s, id).await?).await
+}
+
+/// [`job`] from inputs already read.
+pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job, ApiError> {
+    let Inputs {
+        rig,
+        rig_revision,
+        tiles,
+        tiles_revision,
+        canvas,
+        geometry_key,
+        key,
+    } = inputs;
     let cached = s
         .computed
         .lock()

@@ -105,7 +105,7 @@ async fn auth(
     req: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
-    if let Some(token) = &state.token {
+    if let Some(token) = &state.options.token {
         let given = req
             .headers()
             .get(AUTHORIZATION)

@@ -1,13 +1,13 @@
 //! Per-channel outputs: the warp map (EXR), the blend mask (16-bit PNG) and a rendered preview
 //! (PNG or EXR). The expensive work runs off the async runtime, at most [`WORKERS`] jobs at
 //! once (more get 503 with `Retry-After`), is given up when the client goes away, and is cached
-//! by (channel, rig revision, tiles revision). Each computed warp map is also written under the
-//! data directory (`warps/<id>-r<rig>-t<tiles>.exr`) and served from there after a restart.
+//! by a hash of its inputs. Each computed warp map is also written under the data directory
+//! (`warps/<id>-<hash>.exr`) and served from there after a restart.
 //!
 //! [`WORKERS`]: super::state::WORKERS
 
 use super::ApiError;
-use super::jobs::{etag, job, keys, run_job, warp_file};
+use super::jobs::{etag, inputs, job, job_from, run_job, warp_file};
 use super::preview::Look;
 use super::state::{AppState, Query};
 use crate::content::pattern::Pattern;
@@ -70,25 +70,16 @@ pub async fn warp(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     // After a restart the kept file answers without recomputing.
-    let (rig, rig_revision) = s.store.snapshot();
-    if let (Some(dir), Some(data)) = (&s.store.dir, s.store.channel(&id)) {
-        let (tiles, tiles_revision) = {
-            let g = data.lock().await;
-            (g.tiles.value.clone(), g.tiles.revision)
-        };
-        let (_, key) = keys(&rig, &id, &tiles);
-        let path = dir.join(warp_file(&id, key));
+    let inputs = inputs(&s, &id).await?;
+    if let Some(dir) = &s.store.dir {
+        let path = dir.join(warp_file(&id, inputs.key));
         let read = tokio::task::spawn_blocking(move || std::fs::read(path)).await;
         if let Ok(Ok(bytes)) = read {
-            return file(
-                &s,
-                bytes,
-                "image/x-exr",
-                &etag(key, rig_revision, tiles_revision),
-            );
+            let tag = etag(inputs.key, inputs.rig_revision, inputs.tiles_revision);
+            return file(&s, bytes, "image/x-exr", &tag);
         }
     }
-    let j = job(&s, &id).await?;
+    let j = job_from(&s, &id, inputs).await?;
     let mut attrs = j.computed.map.attributes.clone();
     attrs.push(("omniwarp.rig_revision".into(), j.rig_revision.to_string()));
     attrs.push((

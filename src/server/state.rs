@@ -14,7 +14,6 @@ use axum::response::{IntoResponse, Response};
 use serde::de::DeserializeOwned;
 use std::collections::HashMap;
 use std::net::SocketAddr;
-use std::path::PathBuf;
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex, OnceLock};
 use tokio::sync::{Semaphore, broadcast, watch};
@@ -42,8 +41,6 @@ pub struct Options {
     pub allow_hosts: Vec<String>,
     /// Origins (`scheme://host[:port]`) beyond the daemon's own that browsers may call it from.
     pub allow_origins: Vec<String>,
-    /// A directory mesh screens may be read from, besides the data directory's `meshes/`.
-    pub assets: Option<PathBuf>,
 }
 
 impl Default for Options {
@@ -53,7 +50,6 @@ impl Default for Options {
             memory_budget: crate::limits::MEMORY_BUDGET,
             allow_hosts: Vec::new(),
             allow_origins: Vec::new(),
-            assets: None,
         }
     }
 }
@@ -61,7 +57,6 @@ impl Default for Options {
 pub struct AppState {
     pub store: Store,
     pub options: Options,
-    pub token: Option<String>,
     /// The address the server listens on, once it does (the `Host` check allows it).
     pub bound: OnceLock<SocketAddr>,
     /// Changes as JSON: `{"kind": "rig"|"content"|"tiles"|"proposal", …}`.
@@ -96,7 +91,6 @@ impl AppState {
     pub fn with_options(store: Store, options: Options) -> Arc<Self> {
         Arc::new(AppState {
             store,
-            token: options.token.clone(),
             options,
             bound: OnceLock::new(),
             events: broadcast::channel(256).0,
