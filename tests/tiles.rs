@@ -116,6 +116,7 @@ fn longitude_wrap_around_does_not_tear() {
         scale: 1.0,
         f: 1.0,
         valid: true,
+        outside: false,
     };
     let t = TileScreen::grid(
         2,
@@ -234,6 +235,7 @@ fn feat(x: f64, y: f64) -> Feature {
         scale: 1.0,
         f: 1.0,
         valid: true,
+        outside: false,
     }
 }
 
@@ -469,6 +471,7 @@ fn seed_weaknesses_are_measured() {
                 scale: 1.0,
                 f: 1.0,
                 valid: true,
+                outside: false,
             });
         }
     }
@@ -524,4 +527,35 @@ fn seed_weaknesses_are_measured() {
 
 fn view_fish(fov: f64) -> omniwarp::projection::View {
     view("fisheye", params(None, None, Some(fov)), 200, 200)
+}
+
+/// A screen carries the domain of the projection it was sampled from (issue 14): a 180°
+/// fisheye's tiles reach past its image circle (the features there are marked `outside`) and
+/// the circle cuts them per pixel, so the tiled render is transparent exactly where the direct
+/// fisheye is (21.5 % of a square image). Before, the corners were filled with content.
+#[test]
+fn a_fisheye_screen_is_cut_by_its_image_circle() {
+    let (w, h) = (240usize, 240usize);
+    let src = source("fisheye", params(None, None, Some(180.0)), w, h);
+    let t = build::from_source(&src, 17, 17).unwrap();
+    let Layout::Grid { features, .. } = &t.layout else {
+        unreachable!()
+    };
+    let outside = features.iter().filter(|f| f.outside).count();
+    assert!(outside > 0 && outside < features.len() / 2, "{outside}");
+    let map = t.feature_map(w, h);
+    let direct = omniwarp::normalmap::NormalMap::from_view(&src.view().unwrap(), w as u32, h as u32)
+        .unwrap();
+    let mut differ = 0;
+    let mut empty = 0;
+    for j in 0..h {
+        for i in 0..w {
+            let tiled = map.data[j * w + i].is_some();
+            empty += usize::from(!tiled);
+            differ += usize::from(tiled != direct.direction(i, j).is_some());
+        }
+    }
+    let empty = empty as f64 / (w * h) as f64;
+    assert!((empty - 0.215).abs() < 0.01, "{:.1} % transparent", 100.0 * empty);
+    assert_eq!(differ, 0, "pixels where the tiled and the direct fisheye disagree on coverage");
 }

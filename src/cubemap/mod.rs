@@ -126,27 +126,47 @@ impl<T: Pixel> CubeMap<T> {
 
     /// A cube map whose texels average `f` over `ss` × `ss` directions inside each texel.
     pub fn from_fn(size: usize, ss: usize, f: impl Fn(DVec3) -> T + Sync) -> Self {
+        Self::from_fn_on(size, ss, [true; 6], f)
+    }
+
+    /// [`CubeMap::from_fn`] on the faces marked in `on` only (the others are left transparent
+    /// black): a warp that samples two faces of a fine cube pays for two.
+    pub fn from_fn_on(
+        size: usize,
+        ss: usize,
+        on: [bool; 6],
+        f: impl Fn(DVec3) -> T + Sync,
+    ) -> Self {
         use rayon::prelude::*;
-        let faces: Vec<Raster<T>> = Face::ALL
-            .par_iter()
-            .map(|&face| {
-                Raster::from_fn(size, size, |x, y| {
-                    let mut acc = [0.0f32; 4];
-                    for a in 0..ss {
-                        for b in 0..ss {
-                            let s = (x as f64 + (a as f64 + 0.5) / ss as f64) / size as f64;
-                            let t = (y as f64 + (b as f64 + 0.5) / ss as f64) / size as f64;
-                            let v = f(face_point(face, s, t).normalize()).to_f32();
-                            for k in 0..4 {
-                                acc[k] += v[k];
-                            }
-                        }
+        let texel = |face: Face, x: usize, y: usize| {
+            let mut acc = [0.0f32; 4];
+            for a in 0..ss {
+                for b in 0..ss {
+                    let s = (x as f64 + (a as f64 + 0.5) / ss as f64) / size as f64;
+                    let t = (y as f64 + (b as f64 + 0.5) / ss as f64) / size as f64;
+                    let v = f(face_point(face, s, t).normalize()).to_f32();
+                    for k in 0..4 {
+                        acc[k] += v[k];
                     }
-                    T::from_f32(acc.map(|c| c / (ss * ss) as f32))
-                })
-            })
-            .collect();
-        let faces: [Raster<T>; 6] = faces.try_into().expect("six faces");
+                }
+            }
+            T::from_f32(acc.map(|c| c / (ss * ss) as f32))
+        };
+        let faces = Face::ALL.map(|face| {
+            let mut data = vec![T::from_f32([0.0; 4]); size * size];
+            if on[face.index()] {
+                data.par_chunks_mut(size).enumerate().for_each(|(y, row)| {
+                    for (x, p) in row.iter_mut().enumerate() {
+                        *p = texel(face, x, y);
+                    }
+                });
+            }
+            Raster {
+                width: size,
+                height: size,
+                data,
+            }
+        });
         CubeMap { size, faces }
     }
 

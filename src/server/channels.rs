@@ -7,7 +7,7 @@ use super::state::{AppState, if_match, parse_body, tagged};
 use super::store::{Canvas, ChannelData, Versioned};
 use crate::rig::{Channel, Rig};
 use crate::tiles::TileScreen;
-use crate::tiles::build::grid_of;
+use crate::tiles::build::{extend_past_edge, grid_of};
 use crate::tiles::edit::Edit;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
@@ -25,6 +25,8 @@ fn not_found(id: &str) -> ApiError {
 
 /// The channel's geometric warp as a tile screen: feature (x, y) shows the content direction of
 /// the projector pixel at (x·W − ½, y·H − ½), i.e. the grid runs from image edge to image edge.
+/// Features just off the wall are extrapolated ([`extend_past_edge`]): the tiles across the
+/// wall's edge stay, and the warp's own footprint cuts them (see `jobs`).
 pub fn sample_geometry(
     rig: &Rig,
     ch: &Channel,
@@ -32,11 +34,20 @@ pub fn sample_geometry(
     rows: usize,
 ) -> crate::Result<TileScreen> {
     let (w, h) = (f64::from(ch.width), f64::from(ch.height));
-    grid_of(columns, rows, |s, t| {
-        let q = [(s + 1.0) / 2.0 * w - 0.5, (1.0 - t) / 2.0 * h - 0.5];
-        let v = rig.wall_point(ch, q).and_then(|p| rig.sampling_vector(p));
+    let pixel = |x: f64, y: f64| [x * w - 0.5, y * h - 0.5];
+    let mut t = grid_of(columns, rows, |s, t| {
+        let v = rig
+            .wall_point(ch, pixel((s + 1.0) / 2.0, (1.0 - t) / 2.0))
+            .and_then(|p| rig.sampling_vector(p));
         (v, 1.0)
-    })
+    })?;
+    let wider = rig.doc.screen.extended();
+    extend_past_edge(&mut t, |x, y| {
+        let ray = ch.lens.unproject(pixel(x, y)).ok()?;
+        let p = wider.intersect(ch.position, ch.rotation * ray).point()?;
+        rig.sampling_vector(p)
+    });
+    Ok(t)
 }
 
 fn sampled_rows(ch: &Channel) -> usize {

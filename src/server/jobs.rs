@@ -225,7 +225,8 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
         }
         let (map, f) = match &tiles {
             Some(t) => {
-                let fm = t.feature_map(ch.width as usize, ch.height as usize);
+                let mut fm = t.feature_map(ch.width as usize, ch.height as usize);
+                fm.cut_by(&geometry.warp.map);
                 (fm.normal_map(), Some(fm.f()))
             }
             None => (geometry.warp.map.clone(), None),

@@ -15,6 +15,7 @@ use crate::image_io::{Precision, exr_bytes, png_bytes};
 use crate::normalmap::NormalMap;
 use crate::raster::Raster;
 use crate::render::Filter;
+use crate::render::coverage::face_size_for;
 use crate::rig::{BlendOptions, blend_png_bytes};
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
@@ -140,7 +141,7 @@ pub struct RenderQuery {
     /// The procedural content: smooth or checker.
     #[serde(default)]
     content: Option<String>,
-    /// Face size of the content cube map, 8–2048.
+    /// Face size of the content cube map, 8–2048; by default matched to the preview's pixels.
     #[serde(default)]
     face: Option<usize>,
     /// `cpu` (the reference), `gpu` (wgpu; 8-bit, bilinear) or `auto`.
@@ -198,8 +199,9 @@ pub async fn render(
             ));
         }
     };
-    let face = q.face.unwrap_or(256);
-    if !(8..=2048).contains(&face) {
+    if let Some(face) = q.face
+        && !(8..=2048).contains(&face)
+    {
         return Err(invalid(
             "face",
             format!("must be between 8 and 2048, got {face}"),
@@ -241,6 +243,7 @@ pub async fn render(
     }
     let etag = j.etag();
     let computed = j.computed.clone();
+    let state = s.clone();
     let bytes = run_job(&s, move |cancel| {
         // Every k-th pixel of the warp, its centre pixel per k×k block.
         let pick =
@@ -264,23 +267,28 @@ pub async fn render(
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled.into());
         }
+        // By default the cube's texels are as fine as the preview's finest pixels, so the
+        // pattern's edges show the warp, not the cube's stair steps; 32-bit previews stop at
+        // 1024 (six such faces are 100 MB, as six 8-bit faces of 2048 are).
+        let face = q
+            .face
+            .unwrap_or_else(|| face_size_for(&map, if exr { 1024 } else { 2048 }) as usize);
         let look = Look {
             pattern,
             face,
             filter,
         };
-        if let Some(g) = &gpu {
-            return Ok(look
-                .render_gpu(g, &map, &weights, f.as_deref())
-                .and_then(|img| png_bytes(&img))?);
+        if exr {
+            let cube = look.cube::<[f32; 4]>([true; 6], 1.0);
+            let img = look.render(&cube, &map, &weights, f.as_deref(), 1.0)?;
+            return Ok(exr_bytes(&img, &[], Precision::Float)?);
         }
-        let encoded = if exr {
-            let img = look.render::<[f32; 4]>(&map, &weights, f.as_deref(), 1.0, 1.0)?;
-            exr_bytes(&img, &[], Precision::Float)
-        } else {
-            let img = look.render::<[u8; 4]>(&map, &weights, f.as_deref(), 2.2, 255.0)?;
-            png_bytes(&img)
+        let cube = state.pattern_cubes.get(&look, &map);
+        let img = match &gpu {
+            Some(g) => look.render_gpu(g, &cube, &map, &weights, f.as_deref())?,
+            None => look.render(&cube, &map, &weights, f.as_deref(), 2.2)?,
         };
+        let encoded = png_bytes(&img);
         Ok(encoded?)
     })
     .await?;

@@ -75,6 +75,8 @@ pub struct AppState {
     pub jobs_cancelled: AtomicU64,
     /// The GPU for previews (`?renderer=gpu`), opened on first use.
     pub gpu: std::sync::OnceLock<Option<Arc<GpuWarp>>>,
+    /// The previews' procedural content, evaluated once per pattern and face size.
+    pub pattern_cubes: super::preview::PatternCubes,
 }
 
 impl AppState {
@@ -102,6 +104,7 @@ impl AppState {
             jobs_done: AtomicU64::new(0),
             jobs_cancelled: AtomicU64::new(0),
             gpu: std::sync::OnceLock::new(),
+            pattern_cubes: Default::default(),
         })
     }
 

@@ -92,6 +92,38 @@ impl Screen {
         }
     }
 
+    /// The same surface continued past its edges (a cylinder a height taller each way and 30°
+    /// wider each side, a dome 30° lower, a plane three times the size; a mesh as it is): where
+    /// a projector's light just misses the wall, this says where it would land if the wall went
+    /// on, which is how the warp is continued past the edge.
+    pub fn extended(&self) -> Screen {
+        match self {
+            Screen::Cylinder(c) => {
+                let grow = (c.height[1] - c.height[0]).max(c.radius);
+                let arc = if c.arc[1] - c.arc[0] + 60.0 >= 360.0 {
+                    [-180.0, 180.0]
+                } else {
+                    [c.arc[0] - 30.0, c.arc[1] + 30.0]
+                };
+                Screen::Cylinder(Cylinder {
+                    height: [c.height[0] - grow, c.height[1] + grow],
+                    arc,
+                    ..c.clone()
+                })
+            }
+            Screen::Dome(d) => Screen::Dome(Dome {
+                min_elevation: (d.min_elevation - 30.0).max(-89.0),
+                ..d.clone()
+            }),
+            Screen::Plane(p) => Screen::Plane(Plane {
+                width: 3.0 * p.width,
+                height: 3.0 * p.height,
+                ..p.clone()
+            }),
+            Screen::Mesh { .. } => self.clone(),
+        }
+    }
+
     /// Checks the geometry; `field` is the JSON pointer of this screen for error messages.
     pub fn validate(&self, field: &str) -> Result<()> {
         match self {

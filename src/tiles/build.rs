@@ -43,6 +43,7 @@ fn feature(x: f64, y: f64, d: Option<DVec3>, f: f64) -> Feature {
         scale: 1.0,
         f,
         valid,
+        outside: false,
     }
 }
 
@@ -98,14 +99,104 @@ pub fn grid_of(
 }
 
 /// Samples a projection into a columns × rows grid; features past a fisheye's image circle
-/// continue its formula, so the tiles along the circle still reach it.
+/// continue its formula and are marked `outside`, so the tiles along the circle still reach it
+/// and the projection's domain (the screen's mask, see [`TileScreen::covers`]) cuts them there.
 pub fn from_source(source: &Source, columns: usize, rows: usize) -> Result<TileScreen> {
     let view = source.view()?;
     let mut t = grid_of(columns, rows, |s, t| {
         (view.direction_unbounded(s, t).ok(), 1.0)
     })?;
+    if let super::Layout::Grid { features, .. } = &mut t.layout {
+        for f in features.iter_mut().filter(|f| f.valid) {
+            f.outside = view.direction(2.0 * f.x - 1.0, 1.0 - 2.0 * f.y).is_err();
+        }
+    }
     t.source = Some(source.clone());
     Ok(t)
+}
+
+/// Gives the invalid features of a grid that touch a valid one (in any of the 8 directions) a
+/// direction extrapolated from the valid ones, and marks them `outside`: the tiles that straddle
+/// the edge of what the source shows are then drawn, and the source's own mask (a wall's
+/// footprint, a projection's domain) cuts them per pixel where the edge really is, instead of
+/// the grid cutting them at whole tiles.
+///
+/// `beyond(x, y)` gives the source's own continuation where it has one (the wall continued
+/// past its edge); otherwise each extrapolation continues a line of two valid features through
+/// the invalid one (2·a − b, in unit directions) and averages over the lines that exist; with
+/// none, the nearest valid neighbour's direction is held. Only features that were valid are
+/// used, so the result does not depend on the order of the scan.
+pub fn extend_past_edge(t: &mut TileScreen, beyond: impl Fn(f64, f64) -> Option<DVec3>) {
+    let super::Layout::Grid {
+        columns,
+        rows,
+        features,
+    } = &mut t.layout
+    else {
+        return;
+    };
+    let (c, r) = (*columns as i64, *rows as i64);
+    let before = features.clone();
+    let at = |k: i64, l: i64| -> Option<&Feature> {
+        (k >= 0 && l >= 0 && k < c && l < r)
+            .then(|| &before[(l * c + k) as usize])
+            .filter(|f| f.valid && !f.outside)
+    };
+    let dir = |f: &Feature| super::raster::f_normal(f.phi, f.theta, f.scale);
+    for l in 0..r {
+        for k in 0..c {
+            let me = &before[(l * c + k) as usize];
+            if me.valid {
+                continue;
+            }
+            let mut sum = DVec3::ZERO;
+            let mut near: Option<&Feature> = None;
+            for (dk, dl) in [
+                (1, 0),
+                (-1, 0),
+                (0, 1),
+                (0, -1),
+                (1, 1),
+                (1, -1),
+                (-1, 1),
+                (-1, -1),
+            ] {
+                let Some(a) = at(k + dk, l + dl) else {
+                    continue;
+                };
+                // Sides come before corners, so the anchor is a side neighbour when one exists.
+                near = near.or(Some(a));
+                if let Some(b) = at(k + 2 * dk, l + 2 * dl) {
+                    let e = 2.0 * dir(a) - dir(b);
+                    if e.length() > 1e-9 {
+                        sum += e.normalize();
+                    }
+                }
+            }
+            let Some(anchor) = near else { continue };
+            let d = if let Some(d) = beyond(me.x, me.y) {
+                d
+            } else if sum.length() > 1e-9 {
+                sum.normalize()
+            } else {
+                dir(anchor)
+            };
+            let (phi, theta) = angles(d);
+            let phi = unwrap_deg(phi, anchor.phi);
+            features[(l * c + k) as usize] = Feature {
+                phi: if phi.abs() > 360.0 {
+                    phi - 360.0 * phi.signum()
+                } else {
+                    phi
+                },
+                theta,
+                scale: 1.0,
+                valid: true,
+                outside: true,
+                ..*me
+            };
+        }
+    }
 }
 
 /// Seed 000, Figure 5A: a planar perspective in the centre, cylindrical to the sides.

@@ -85,6 +85,8 @@ fn midpoint(a: &Feature, b: &Feature) -> Feature {
         scale: (a.scale + b.scale) / 2.0,
         f: (a.f + b.f) / 2.0,
         valid: a.valid && b.valid,
+        // Possibly on the wall, but nothing here says so: held, like the edge it sits at.
+        outside: a.outside || b.outside,
     }
 }
 
@@ -155,9 +157,16 @@ impl TileScreen {
                     for k in k0..=k1 {
                         let src = fresh[(l - l0) * (k1 - k0 + 1) + (k - k0)];
                         let dst = &mut features[l * c + k];
-                        // Keep the screen positions; only what is seen there changes.
-                        let (x, y, f) = (dst.x, dst.y, dst.f);
-                        *dst = Feature { x, y, f, ..src };
+                        // Keep the screen positions and where the source's edge is; only what
+                        // is seen there changes.
+                        let (x, y, f, outside) = (dst.x, dst.y, dst.f, dst.outside);
+                        *dst = Feature {
+                            x,
+                            y,
+                            f,
+                            outside,
+                            ..src
+                        };
                     }
                 }
             }
@@ -235,9 +244,11 @@ impl TileScreen {
                                 before[(l - 1) * c + k],
                                 before[(l + 1) * c + k],
                             ];
-                            // Invalid features hold no direction (φ = θ = 0), and a valid one
-                            // beside them is the wall's edge: both stay where they are.
-                            if !me.valid || n.iter().any(|f| !f.valid) {
+                            // Invalid features hold no direction (φ = θ = 0) and outside ones an
+                            // extrapolated one; a feature beside either is the wall's edge. All
+                            // stay where they are, so the edge does not drift inwards.
+                            let held = |f: &Feature| !f.valid || f.outside;
+                            if held(&me) || n.iter().any(held) {
                                 continue;
                             }
                             let mean = |g: fn(&Feature) -> f64| n.iter().map(g).sum::<f64>() / 4.0;

@@ -37,10 +37,17 @@ pub struct Feature {
     /// Custom per-feature value, interpolated like the others (the renderer's saturation).
     #[serde(default = "one")]
     pub f: f64,
-    /// False where the source shows nothing (outside a projection's domain); triangles with an
-    /// invalid corner are not drawn.
+    /// False where the feature holds no direction at all; triangles with an invalid corner are
+    /// not drawn.
     #[serde(default = "yes", skip_serializing_if = "is_true")]
     pub valid: bool,
+    /// True where the feature lies past the edge of what the source shows (off the wall, past a
+    /// fisheye's image circle): its direction is extrapolated, so the tiles that straddle the
+    /// edge are drawn up to it, and the cut is made per pixel by the mask of the source (the
+    /// projection's domain, the wall's footprint), not by the tile grid. Averaging edits hold
+    /// these features and their neighbours: together they are the edge.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub outside: bool,
 }
 
 fn one() -> f64 {
@@ -51,6 +58,9 @@ fn yes() -> bool {
 }
 fn is_true(b: &bool) -> bool {
     *b
+}
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// How the features are connected.

@@ -80,8 +80,38 @@ struct Prepared {
 }
 
 impl TileScreen {
-    /// Rasterises the tile screen at width × height pixel centres.
+    /// Whether the screen's source shows anything at screen position (x, y): the mask of the
+    /// projection it was sampled from (a fisheye's image circle), true without a source. Tiles
+    /// are drawn past the edge (see [`super::Feature::outside`]); this is where they are cut.
+    pub fn mask(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
+        let view = self.source.as_ref().and_then(|s| s.view().ok());
+        move |x, y| {
+            view.as_ref()
+                .is_none_or(|v| v.direction(2.0 * x - 1.0, 1.0 - 2.0 * y).is_ok())
+        }
+    }
+
+    /// Rasterises the tile screen at width × height pixel centres, cut by its [`Self::mask`].
     pub fn feature_map(&self, width: usize, height: usize) -> FeatureMap {
+        let mut map = self.unmasked_feature_map(width, height);
+        if self.source.is_some() {
+            let mask = self.mask();
+            let (w, h) = (width as f64, height as f64);
+            map.data
+                .par_chunks_mut(width)
+                .enumerate()
+                .for_each(|(j, row)| {
+                    for (i, p) in row.iter_mut().enumerate() {
+                        if p.is_some() && !mask((i as f64 + 0.5) / w, (j as f64 + 0.5) / h) {
+                            *p = None;
+                        }
+                    }
+                });
+        }
+        map
+    }
+
+    fn unmasked_feature_map(&self, width: usize, height: usize) -> FeatureMap {
         let (w, h) = (width as f64, height as f64);
         let tris: Vec<Prepared> = self
             .triangles()
@@ -163,6 +193,17 @@ impl TileScreen {
 }
 
 impl FeatureMap {
+    /// Leaves only the pixels `mask` also covers: a channel's tiles are cut where the
+    /// projector's light leaves the wall, which the tile grid only approximates.
+    pub fn cut_by(&mut self, mask: &NormalMap) {
+        let w = self.width;
+        self.data.par_iter_mut().enumerate().for_each(|(n, p)| {
+            if mask.direction(n % w, n / w).is_none() {
+                *p = None;
+            }
+        });
+    }
+
     /// The normal map: N = f_normal(φ, θ, scale) where a tile covers the pixel.
     pub fn normal_map(&self) -> NormalMap {
         let pixels = Raster {
