@@ -57,16 +57,14 @@ fn the_binary_serves_the_demo_edits_tiles_and_keeps_files_on_disk() {
     );
 
     // On disk: the rig, the edited tiles with their revision, the warp map of that revision.
-    let saved: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("channels/centre.json")).unwrap())
-            .unwrap();
-    assert_eq!(saved["tiles"]["revision"], 2);
-    let feature = &saved["tiles"]["value"]["layout"]["features"][10 * 33 + 16];
+    let (revision, saved) = common::server::stored(dir.path(), "channels/centre/tiles").unwrap();
+    assert_eq!((revision, &saved["revision"]), (2, &serde_json::json!(2)));
+    let feature = &saved["layout"]["features"][10 * 33 + 16];
     assert_eq!(
         (feature["theta"].as_f64(), feature["f"].as_f64()),
         (Some(5.0), Some(0.5))
     );
-    assert!(dir.path().join("rig.json").exists());
+    assert!(common::server::stored(dir.path(), "rig").is_some());
     // Kept under a hash of what it was computed from: the one in the ETag.
     let hash = warp
         .header("etag")

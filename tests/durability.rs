@@ -1,15 +1,17 @@
 //! Durability that a killed process cannot show: the page cache outlives the process, so a
-//! missing fsync passes every kill -9 test. Here the daemon's store writes under a journal of
-//! their steps (`image_io::journal`), and a model of what a file system keeps after power loss
-//! (a file's contents only once synced, a rename only once its directory is synced) replays
-//! them: at every point of a write a crash leaves each file old or new, never torn, and once a
-//! write returns the new contents are durable. Each step is then failed in turn, as a full disk
-//! would: the write reports the error, the state on disk reopens, and no temporary file stays.
+//! missing fsync passes every kill -9 test. The daemon's state lives in SQLite (WAL,
+//! `synchronous = FULL`: its own journal makes that guarantee); the files it still writes
+//! itself — uploaded meshes, the warp cache, every file the CLI writes — go through
+//! `image_io::atomic_write`. Here those writes run under a journal of their steps
+//! (`image_io::journal`), and a model of what a file system keeps after power loss (a file's
+//! contents only once synced, a rename only once its directory is synced) replays them: at
+//! every point of a write a crash leaves each file old or new, never torn, and once a write
+//! returns the new contents are durable. Each step is then failed in turn, as a full disk would:
+//! the write reports the error and no temporary file stays.
 
 mod common;
 
-use omniwarp::image_io::{Step, journal};
-use omniwarp::server::{ChannelData, Store};
+use omniwarp::image_io::{Step, atomic_write, create_dir_durably, journal};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -77,21 +79,23 @@ fn files(dir: &Path) -> HashMap<PathBuf, Vec<u8>> {
     out
 }
 
-/// The store with a rig at revision 1 and one channel's state written once.
-fn store(dir: &Path) -> Store {
-    let s = Store::open(Some(dir.to_path_buf()), Some(common::server::flat_rig())).unwrap();
-    s.save_channel("left", &ChannelData::default()).unwrap();
-    s
+/// Two files written once, as a mesh upload and a kept warp map are (a file in a directory
+/// made durably on first use).
+fn store(dir: &Path) -> &Path {
+    writes(dir, b"first").unwrap();
+    dir
 }
 
-/// The store's three kinds of write, each one revision on.
-fn writes(s: &Store) -> omniwarp::Result<()> {
-    let (rig, revision) = s.snapshot();
-    s.save_rig(&rig.doc, revision + 1)?;
-    let mut data = ChannelData::default();
-    data.tiles.revision = 2;
-    data.content.revision = 2;
-    s.save_channel("left", &data)
+/// Both files rewritten.
+fn writes(dir: &Path, bytes: &[u8]) -> omniwarp::Result<()> {
+    for name in ["meshes/wall.obj", "warps/left-0123456789abcdef.exr"] {
+        let path = dir.join(name);
+        create_dir_durably(path.parent().unwrap())?;
+        atomic_write(&path, |f| {
+            std::io::Write::write_all(f, bytes).map_err(|e| omniwarp::Error::file(&path, e))
+        })?;
+    }
+    Ok(())
 }
 
 #[test]
@@ -99,7 +103,7 @@ fn every_crash_point_leaves_old_or_new_and_an_acknowledged_write_is_durable() {
     let dir = tempfile::tempdir().unwrap();
     let s = store(dir.path());
     let before = files(dir.path());
-    let (result, steps) = journal(None, || writes(&s));
+    let (result, steps) = journal(None, || writes(s, b"second"));
     result.unwrap();
     let after = files(dir.path());
     assert!(steps.len() >= 8, "{steps:?}");
@@ -131,28 +135,23 @@ fn every_crash_point_leaves_old_or_new_and_an_acknowledged_write_is_durable() {
             path.display()
         );
     }
-    for written in [
-        "rig.json",
-        "rig.json.prev",
-        "channels/left.json",
-        "channels/left.json.prev",
-    ] {
-        assert!(after.contains_key(&dir.path().join(written)), "{written}");
+    for written in ["meshes/wall.obj", "warps/left-0123456789abcdef.exr"] {
+        assert_eq!(after[&dir.path().join(written)], b"second", "{written}");
     }
 }
 
 #[test]
-fn a_write_failing_at_any_step_reports_it_and_leaves_a_state_that_reopens() {
+fn a_write_failing_at_any_step_reports_it_and_leaves_old_or_new() {
     let probe = tempfile::tempdir().unwrap();
     let s = store(probe.path());
     let ((), steps) = {
-        let (r, steps) = journal(None, || writes(&s));
+        let (r, steps) = journal(None, || writes(s, b"second"));
         (r.unwrap(), steps)
     };
     for k in 0..steps.len() {
         let dir = tempfile::tempdir().unwrap();
         let s = store(dir.path());
-        let (result, taken) = journal(Some(k), || writes(&s));
+        let (result, taken) = journal(Some(k), || writes(s, b"second"));
         let e = result.expect_err("an injected fault must be reported");
         assert!(e.to_string().contains("injected fault"), "step {k}: {e}");
         assert_eq!(
@@ -160,19 +159,18 @@ fn a_write_failing_at_any_step_reports_it_and_leaves_a_state_that_reopens() {
             k + 1,
             "step {k}: the write went on after the fault"
         );
-        drop(s);
         let leftovers: Vec<_> = files(dir.path())
             .into_keys()
             .filter(|p| p.to_string_lossy().contains(".omniwarp-"))
             .collect();
         assert!(leftovers.is_empty(), "step {k}: {leftovers:?}");
-        let again = Store::open(Some(dir.path().to_path_buf()), None).unwrap();
-        let (_, revision) = again.snapshot();
-        assert!(
-            revision == 1 || revision == 2,
-            "step {k}: revision {revision}"
-        );
-        assert!(again.channel("left").is_some());
+        for (path, bytes) in files(dir.path()) {
+            assert!(
+                bytes == b"first" || bytes == b"second",
+                "step {k}: {} holds neither version",
+                path.display()
+            );
+        }
     }
 }
 

@@ -92,7 +92,10 @@ async fn c2_a_rig_whose_warps_exceed_the_memory_budget_is_refused_and_never_save
         body["error"].as_str().unwrap().contains("memory budget"),
         "{body}"
     );
-    let saved = std::fs::read_to_string(dir.path().join("rig.json")).unwrap();
+    let saved = common::server::stored(dir.path(), "rig")
+        .unwrap()
+        .1
+        .to_string();
     assert!(
         !saved.contains("16384"),
         "the refused rig never reaches the disk"
@@ -264,15 +267,19 @@ async fn c6_a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_d
             .starts_with("/layout")
     );
     drop(s);
-    // The same screen in a channel file (and its .prev) stops the start; --reset sets both
-    // aside and starts clean.
-    let file = serde_json::json!({
-        "content": {"revision": 1, "value": serde_json::to_value(omniwarp::server::Canvas::default()).unwrap()},
-        "tiles": {"revision": 2, "value": screen},
-    });
-    std::fs::create_dir_all(dir.path().join("channels")).unwrap();
-    for name in ["left.json", "left.json.prev"] {
-        std::fs::write(dir.path().join("channels").join(name), file.to_string()).unwrap();
+    // The same screen kept in the database (written there by a bug or a hand) stops the start;
+    // --reset starts the channel's screen again from the geometry, as a new revision.
+    {
+        let db = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db"))).unwrap();
+        let meta = omniwarp::server::db::Meta {
+            who: "test".into(),
+            action: "put",
+            request: None,
+            undo_to: None,
+            redo_to: None,
+        };
+        db.write("channels/left/tiles", None, (2, &screen), &meta)
+            .unwrap();
     }
     let refused = Store::open(Some(dir.path().to_path_buf()), Some(flat_rig()));
     let why = refused
@@ -280,7 +287,7 @@ async fn c6_a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_d
         .expect("a damaged channel stops the start")
         .to_string();
     assert!(
-        why.contains("--reset") && why.contains("left.json"),
+        why.contains("--reset") && why.contains("channels/left/tiles"),
         "{why}"
     );
     let reset = Store::open_with(
@@ -290,9 +297,11 @@ async fn c6_a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_d
             reset: true,
             ..OpenOptions::default()
         },
-    );
-    assert!(reset.is_ok());
-    assert!(dir.path().join("channels/left.json.damaged").exists());
+    )
+    .unwrap();
+    let left = reset.channel("left").unwrap();
+    let g = left.try_lock().unwrap();
+    assert_eq!((g.tiles.revision, g.tiles.value.is_none()), (3, true));
 }
 
 #[tokio::test]
@@ -516,16 +525,11 @@ async fn c10_proposals_are_capped_oldest_first() {
         StatusCode::NOT_FOUND
     );
     assert_eq!(call(&s, get("/v1/proposals/7")).await.0, StatusCode::OK);
-    let kept = std::fs::read_dir(dir.path().join("proposals"))
+    let kept = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db")))
         .unwrap()
-        .filter(|e| {
-            e.as_ref()
-                .unwrap()
-                .file_name()
-                .to_string_lossy()
-                .ends_with(".json")
-        })
-        .count();
+        .proposals()
+        .unwrap()
+        .len();
     assert_eq!(kept as u64, cap, "and on disk");
     drop(s);
     let again = state(Some(dir.path()), None);
@@ -748,52 +752,68 @@ async fn set_theta(s: &Arc<AppState>, revision: u64, theta: f64) -> StatusCode {
     .0
 }
 
+/// A kept document that fails validation on start (written behind the daemon's back, or valid
+/// under an older release) falls back to the newest revision before it that passes, kept as a
+/// new revision: revision numbers never repeat, so no cache can serve the lost one's warp.
 #[tokio::test]
-async fn d1_a_revision_number_reused_after_a_fallback_serves_its_own_warp() {
+async fn d1_a_document_refused_on_start_falls_back_to_the_revision_before_as_a_new_one() {
     let dir = tempfile::tempdir().unwrap();
     let s = state(Some(dir.path()), None);
     assert_eq!(set_theta(&s, 1, 0.3).await, StatusCode::OK);
     assert_eq!(set_theta(&s, 2, 0.6).await, StatusCode::OK);
-    let (_, h, lost) = call(&s, get("/v1/channels/left/warp.exr")).await;
-    let lost_tag = h[header::ETAG].clone();
+    let (_, h, _) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    let kept_tag = h[header::ETAG].to_str().unwrap().to_string();
     drop(s);
-    // Revision 3 is torn; the restart falls back to revision 2, and a different edit makes a
-    // new revision 3.
-    std::fs::write(dir.path().join("channels/left.json"), "{ torn").unwrap();
+    let (_, mut doc) = common::server::stored(dir.path(), "channels/left/tiles").unwrap();
+    doc["layout"]["features"][0]["x"] = serde_json::json!(7.0);
+    doc["revision"] = serde_json::json!(4);
+    let db = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db"))).unwrap();
+    let meta = omniwarp::server::db::Meta {
+        who: "test".into(),
+        action: "put",
+        request: None,
+        undo_to: None,
+        redo_to: None,
+    };
+    db.write("channels/left/tiles", None, (4, &doc), &meta)
+        .unwrap();
+    drop(db);
     let s = state(Some(dir.path()), None);
-    assert_eq!(set_theta(&s, 2, -0.6).await, StatusCode::OK);
-    let (_, h, now) = call(&s, get("/v1/channels/left/warp.exr")).await;
-    assert!(h[header::ETAG].to_str().unwrap().ends_with("-1.3\""));
-    assert_ne!(
-        h[header::ETAG],
-        lost_tag,
-        "same revision numbers, other contents"
+    let (_, h, _) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    let tag = h[header::ETAG].to_str().unwrap();
+    assert!(tag.ends_with("-1.5\""), "{tag}");
+    // The ETag's first part hashes what the warp is computed from.
+    let hash = |t: &str| t.split('-').next().unwrap().to_string();
+    assert_eq!(
+        hash(tag),
+        hash(&kept_tag),
+        "revision 5 shows what revision 3 showed"
     );
-    assert_ne!(now, lost, "the warp of the lost revision is not served");
+    assert_eq!(set_theta(&s, 5, -0.6).await, StatusCode::OK);
+    let (_, h, _) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert!(h[header::ETAG].to_str().unwrap().ends_with("-1.6\""));
 }
 
 #[test]
 fn d2_damaged_state_stops_the_start_even_with_demo_unless_reset() {
     let dir = tempfile::tempdir().unwrap();
     drop(Store::open(Some(dir.path().to_path_buf()), Some(flat_rig())).unwrap());
-    for f in ["rig.json", "rig.json.prev"] {
-        std::fs::write(
-            dir.path().join(f),
-            "{\"revision\": 3, \"rig\": {\"format\": 1",
-        )
-        .unwrap();
-    }
+    let db = dir.path().join("omniwarp.db");
+    let mut bytes = std::fs::read(&db).unwrap();
+    // A sector of garbage over the header: no longer a database SQLite opens.
+    bytes[..512].fill(0x5a);
+    std::fs::write(&db, &bytes).unwrap();
     let demo: omniwarp::rig::RigDoc = serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap();
     let refused = Store::open(Some(dir.path().to_path_buf()), Some(demo.clone()));
     let why = refused
         .err()
         .expect("damaged state stops the start")
         .to_string();
-    assert!(why.contains("rig.json") && why.contains("--reset"), "{why}");
     assert!(
-        dir.path().join("rig.json.prev").exists(),
-        "nothing is overwritten"
+        why.contains("omniwarp.db") && why.contains("--reset"),
+        "{why}"
     );
+    assert_eq!(std::fs::read(&db).unwrap(), bytes, "nothing is overwritten");
     // The binary says the same and exits non-zero.
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
         .args(["serve", "--demo", "--bind", "127.0.0.1:0", "--data"])
@@ -812,15 +832,18 @@ fn d2_damaged_state_stops_the_start_even_with_demo_unless_reset() {
     )
     .unwrap();
     assert_eq!(reset.snapshot().1, 1);
-    assert!(dir.path().join("rig.json.damaged").exists());
-    assert!(dir.path().join("rig.json.prev.damaged").exists());
+    assert_eq!(
+        std::fs::read(dir.path().join("omniwarp.db.damaged")).unwrap(),
+        bytes,
+        "set aside for whoever wants to look"
+    );
 }
 
 #[test]
 fn d4_temporary_files_a_killed_process_left_are_removed_at_start() {
     let dir = tempfile::tempdir().unwrap();
     drop(Store::open(Some(dir.path().to_path_buf()), Some(flat_rig())).unwrap());
-    let left: Vec<_> = ["", "channels", "proposals", "warps"]
+    let left: Vec<_> = ["", "meshes", "warps"]
         .iter()
         .map(|sub| {
             let d = dir.path().join(sub);

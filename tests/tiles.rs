@@ -544,8 +544,9 @@ fn a_fisheye_screen_is_cut_by_its_image_circle() {
     let outside = features.iter().filter(|f| f.outside).count();
     assert!(outside > 0 && outside < features.len() / 2, "{outside}");
     let map = t.feature_map(w, h);
-    let direct = omniwarp::normalmap::NormalMap::from_view(&src.view().unwrap(), w as u32, h as u32)
-        .unwrap();
+    let direct =
+        omniwarp::normalmap::NormalMap::from_view(&src.view().unwrap(), w as u32, h as u32)
+            .unwrap();
     let mut differ = 0;
     let mut empty = 0;
     for j in 0..h {
@@ -556,6 +557,13 @@ fn a_fisheye_screen_is_cut_by_its_image_circle() {
         }
     }
     let empty = empty as f64 / (w * h) as f64;
-    assert!((empty - 0.215).abs() < 0.01, "{:.1} % transparent", 100.0 * empty);
-    assert_eq!(differ, 0, "pixels where the tiled and the direct fisheye disagree on coverage");
+    assert!(
+        (empty - 0.215).abs() < 0.01,
+        "{:.1} % transparent",
+        100.0 * empty
+    );
+    assert_eq!(
+        differ, 0,
+        "pixels where the tiled and the direct fisheye disagree on coverage"
+    );
 }

@@ -118,6 +118,12 @@ pub fn run(a: ServeArgs) -> Result<()> {
             memory_budget: a.memory_budget,
             allow_hosts: a.allow_hosts,
             allow_origins: a.allow_origins,
+            // The history names who changed what: with a token, the token file's name.
+            user: a
+                .token_file
+                .as_ref()
+                .and_then(|p| p.file_stem())
+                .map_or("local".into(), |n| n.to_string_lossy().into_owned()),
         },
     );
     let rt = tokio::runtime::Builder::new_multi_thread()

@@ -5,7 +5,7 @@
 use super::ApiError;
 use super::jobs::run_job;
 use super::rig::commit_rig;
-use super::state::{AppState, if_match, parse_body, tagged};
+use super::state::{AppState, if_match, meta, parse_body, tagged};
 use super::store::Proposal;
 use crate::calibration::{CorrespondencesDoc, calibrate_unless};
 use crate::rig::Rig;
@@ -118,6 +118,7 @@ pub async fn apply_proposal(
     *slot = p.proposed.clone();
     let next = Rig::from_doc(doc)?;
     next.check_budget(s.options.memory_budget)?;
-    let revision = commit_rig(&s, wanted, next).await?;
+    let request = serde_json::json!({ "proposal": p.id });
+    let revision = commit_rig(&s, wanted, next, meta(&s, "apply", Some(request))).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }

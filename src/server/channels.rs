@@ -2,9 +2,10 @@
 //! revision (`ETag`, `If-Match`, 412 with the current one when stale).
 
 use super::ApiError;
+use super::db::Meta;
 use super::jobs::run_write;
-use super::state::{AppState, if_match, parse_body, tagged};
-use super::store::{Canvas, ChannelData, Versioned};
+use super::state::{AppState, AtRevision, Query, document_at, if_match, meta, parse_body, tagged};
+use super::store::{Canvas, ChannelData, Versioned, content_resource, tiles_resource};
 use crate::rig::{Channel, Rig};
 use crate::tiles::TileScreen;
 use crate::tiles::build::{extend_past_edge, grid_of};
@@ -71,33 +72,87 @@ fn fresh(current: u64, wanted: u64) -> Result<(), ApiError> {
     }
 }
 
-/// Replaces a channel's state with `next` after it is durable, then announces `kind`.
-async fn commit(
+/// Which of a channel's documents a write replaces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Part {
+    Content,
+    Tiles,
+}
+
+impl Part {
+    pub fn kind(self) -> &'static str {
+        match self {
+            Part::Content => "content",
+            Part::Tiles => "tiles",
+        }
+    }
+
+    pub fn resource(self, id: &str) -> String {
+        match self {
+            Part::Content => content_resource(id),
+            Part::Tiles => tiles_resource(id),
+        }
+    }
+
+    /// The revision and document of this part of `data`.
+    pub fn of(self, data: &ChannelData) -> (u64, serde_json::Value) {
+        match self {
+            Part::Content => (
+                data.content.revision,
+                serde_json::to_value(&data.content.value).expect("canvases serialise"),
+            ),
+            Part::Tiles => (
+                data.tiles.revision,
+                serde_json::to_value(&data.tiles.value).expect("tile screens serialise"),
+            ),
+        }
+    }
+}
+
+/// Replaces a channel's state with `next` once the changed part is durable with its history
+/// row, then announces it. A plain write can be undone back to the revision it replaced.
+pub async fn commit(
     s: &Arc<AppState>,
     id: &str,
     held: &mut ChannelData,
     next: ChannelData,
-    kind: &str,
-    revision: u64,
-) -> Result<(), ApiError> {
-    let (state, id2, copy) = (s.clone(), id.to_string(), next.clone());
-    tokio::task::spawn_blocking(move || state.store.save_channel(&id2, &copy))
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))??;
+    part: Part,
+    mut meta: Meta,
+) -> Result<u64, ApiError> {
+    let (before, after) = (part.of(held), part.of(&next));
+    if matches!(meta.action, "put" | "patch" | "delete") {
+        meta.undo_to = Some(before.0);
+    }
+    let (state, resource, revision) = (s.clone(), part.resource(id), after.0);
+    tokio::task::spawn_blocking(move || {
+        state
+            .store
+            .save_doc(&resource, (before.0, &before.1), (after.0, &after.1), &meta)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))??;
     *held = next;
-    s.announce(serde_json::json!({"kind": kind, "channel": id, "revision": revision}));
-    Ok(())
+    s.announce(serde_json::json!({"kind": part.kind(), "channel": id, "revision": revision}));
+    Ok(revision)
 }
 
 pub async fn get_content(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
+    Query(q): Query<AtRevision>,
 ) -> Result<Response, ApiError> {
     let d = data(&s, &id).await?;
-    let g = d.lock().await;
+    let (revision, content) = {
+        let g = d.lock().await;
+        Part::Content.of(&g)
+    };
+    let (revision, content) = match q.revision {
+        Some(r) if r != revision => (r, document_at(&s, content_resource(&id), r).await?),
+        _ => (revision, content),
+    };
     Ok(tagged(
-        serde_json::json!({"revision": g.content.revision, "content": g.content.value}),
-        g.content.revision,
+        serde_json::json!({"revision": revision, "content": content}),
+        revision,
     ))
 }
 
@@ -119,7 +174,16 @@ pub async fn put_content(
         revision,
         value: canvas,
     };
-    commit(&s, &id, &mut g, next, "content", revision).await?;
+    let request = Some(serde_json::to_value(&next.content.value).expect("canvases serialise"));
+    commit(
+        &s,
+        &id,
+        &mut g,
+        next,
+        Part::Content,
+        meta(&s, "put", request),
+    )
+    .await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 
@@ -127,12 +191,21 @@ pub async fn put_content(
 pub async fn get_tiles(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
+    Query(q): Query<AtRevision>,
 ) -> Result<Response, ApiError> {
     let d = data(&s, &id).await?;
-    let g = d.lock().await;
-    let revision = g.tiles.revision;
-    let (screen, follows) = match &g.tiles.value {
-        Some(t) => (t.clone(), false),
+    let (mut revision, mut value) = {
+        let g = d.lock().await;
+        (g.tiles.revision, g.tiles.value.clone())
+    };
+    if let Some(r) = q.revision.filter(|r| *r != revision) {
+        let doc = document_at(&s, tiles_resource(&id), r).await?;
+        value = serde_json::from_value(doc).map_err(|e| ApiError::Internal(e.to_string()))?;
+        revision = r;
+    }
+    // A revision that followed the geometry is shown sampled from today's rig.
+    let (screen, follows) = match value {
+        Some(t) => (t, false),
         None => {
             let (rig, _) = s.store.snapshot();
             let ch = rig.channel(&id).map_err(|_| not_found(&id))?;
@@ -163,7 +236,7 @@ pub async fn put_tiles(
         },
         other => other.into(),
     })?;
-    replace_tiles(&s, &id, wanted, Some(screen)).await
+    replace_tiles(&s, &id, wanted, Some(screen), "put").await
 }
 
 /// Back to the geometry's exact warp.
@@ -173,7 +246,7 @@ pub async fn delete_tiles(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let wanted = if_match(&headers)?;
-    replace_tiles(&s, &id, wanted, None).await
+    replace_tiles(&s, &id, wanted, None, "delete").await
 }
 
 async fn replace_tiles(
@@ -181,6 +254,7 @@ async fn replace_tiles(
     id: &str,
     wanted: u64,
     screen: Option<TileScreen>,
+    action: &'static str,
 ) -> Result<Response, ApiError> {
     let d = data(s, id).await?;
     let mut g = d.lock().await;
@@ -194,7 +268,7 @@ async fn replace_tiles(
             t
         }),
     };
-    commit(s, id, &mut g, next, "tiles", revision).await?;
+    commit(s, id, &mut g, next, Part::Tiles, meta(s, action, None)).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 
@@ -202,6 +276,10 @@ async fn replace_tiles(
 #[serde(deny_unknown_fields)]
 pub struct Patch {
     pub edits: Vec<Edit>,
+    /// With an `If-Match` older than the current revision: apply on top of the current screen
+    /// when no revision since touched the features these edits touch (else 412 as always).
+    #[serde(default)]
+    pub merge: bool,
 }
 
 /// Applies a list of edits, all or none; the first edit of a channel that follows the geometry
@@ -226,25 +304,101 @@ pub async fn patch_tiles(
     }
     let d = data(&s, &id).await?;
     let mut g = d.lock().await;
-    fresh(g.tiles.revision, wanted)?;
+    let current = g.tiles.revision;
+    if current < wanted || (current > wanted && !patch.merge) {
+        return Err(ApiError::Stale { current });
+    }
     let (rig, _) = s.store.snapshot();
     let start = g.tiles.value.clone();
     // Edits resample and validate whole grids: in the pool, not on the runtime, and given up
     // when the client goes away. The channel stays locked meanwhile, so edits stay in order.
-    let (id2, edits) = (id.clone(), patch.edits);
+    let request = serde_json::from_slice::<serde_json::Value>(&body)
+        .ok()
+        .map(|v| v["edits"].clone());
+    let (id2, edits, state) = (id.clone(), patch.edits, s.clone());
     let mut screen = run_write(&s, move |cancel| {
+        if current > wanted {
+            merges(&state, &rig, &id2, wanted, current, &edits, cancel)?;
+        }
         apply_edits(&rig, &id2, start, edits, cancel)
     })
     .await?;
-    let revision = wanted + 1;
+    let revision = current + 1;
     screen.revision = revision;
     let mut next = g.clone();
     next.tiles = Versioned {
         revision,
         value: Some(screen),
     };
-    commit(&s, &id, &mut g, next, "tiles", revision).await?;
+    commit(
+        &s,
+        &id,
+        &mut g,
+        next,
+        Part::Tiles,
+        meta(&s, "patch", request),
+    )
+    .await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
+}
+
+/// Whether `edits`, written against revision `base`, can be applied on top of `current`: the
+/// features they change (applied to `base`) and those every revision since changed (from the
+/// history's patches) must not meet, and nothing else may have changed (grid size, source,
+/// interpolation, a whole screen put). Otherwise 412 with the current revision.
+fn merges(
+    s: &AppState,
+    rig: &Rig,
+    id: &str,
+    base: u64,
+    current: u64,
+    edits: &[Edit],
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<(), ApiError> {
+    let stale = || ApiError::Stale { current };
+    let resource = tiles_resource(id);
+    let doc = s.store.db.at(&resource, base)?.ok_or_else(stale)?;
+    let before: Option<TileScreen> =
+        serde_json::from_value(doc).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let ch = rig.channel(id).map_err(|_| not_found(id))?;
+    let before = match before {
+        Some(t) => t,
+        None => sample_geometry(rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
+    };
+    let after = apply_edits(rig, id, Some(before.clone()), edits.to_vec(), cancel)?;
+    let json = |t: &TileScreen| serde_json::to_value(t).expect("tile screens serialise");
+    let mine = touched(&json_patch::diff(&json(&before), &json(&after))).ok_or_else(stale)?;
+    let mut theirs = std::collections::BTreeSet::new();
+    for r in base + 1..=current {
+        let patch = s.store.db.patch_of(&resource, r)?.ok_or_else(stale)?;
+        theirs.extend(touched(&patch).ok_or_else(stale)?);
+    }
+    if mine.is_disjoint(&theirs) {
+        Ok(())
+    } else {
+        Err(stale())
+    }
+}
+
+/// The grid features a patch of a tile screen document changes, or `None` if it changes
+/// anything else (its own revision number aside).
+fn touched(patch: &json_patch::Patch) -> Option<std::collections::BTreeSet<usize>> {
+    let mut out = std::collections::BTreeSet::new();
+    for op in &patch.0 {
+        let path = op.path().as_str();
+        if path == "/revision" {
+            continue;
+        }
+        let mut parts = path.strip_prefix("/layout/features/")?.split('/');
+        let index = parts.next()?;
+        // Adding or removing a whole feature changes the grid.
+        let whole = parts.next().is_none();
+        if whole && !matches!(op, json_patch::PatchOperation::Replace(_)) {
+            return None;
+        }
+        out.insert(index.parse().ok()?);
+    }
+    Some(out)
 }
 
 /// The screen after `edits`, all or none; errors name the edit (`/edits/N/field`).

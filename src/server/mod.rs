@@ -8,9 +8,11 @@ mod cache;
 mod calib;
 mod channels;
 pub mod client;
+pub mod db;
 mod error;
 mod exports;
 mod guard;
+mod history;
 mod jobs;
 mod meshes;
 mod outputs;
@@ -59,12 +61,22 @@ routes! {
     "/v1/health" => get(rig::health);
     "/v1/version" => get(rig::version);
     "/v1/rig" => get(rig::get_rig).put(rig::put_rig);
+    "/v1/rig/revert" => post(history::rig_revert);
+    "/v1/rig/undo" => post(history::rig_undo);
+    "/v1/rig/redo" => post(history::rig_redo);
+    "/v1/history" => get(history::list);
     "/v1/channels" => get(rig::channels);
     "/v1/channels/{id}/content" => get(channels::get_content).put(channels::put_content);
+    "/v1/channels/{id}/content/revert" => post(history::content_revert);
+    "/v1/channels/{id}/content/undo" => post(history::content_undo);
+    "/v1/channels/{id}/content/redo" => post(history::content_redo);
     "/v1/channels/{id}/tiles" => get(channels::get_tiles)
         .put(channels::put_tiles)
         .patch(channels::patch_tiles)
         .delete(channels::delete_tiles);
+    "/v1/channels/{id}/tiles/revert" => post(history::tiles_revert);
+    "/v1/channels/{id}/tiles/undo" => post(history::tiles_undo);
+    "/v1/channels/{id}/tiles/redo" => post(history::tiles_redo);
     "/v1/channels/{id}/calibration" => post(calib::propose);
     "/v1/proposals/{pid}" => get(calib::get_proposal);
     "/v1/proposals/{pid}/apply" => post(calib::apply_proposal);

@@ -29,7 +29,10 @@ pub struct Look {
 /// Cubes of the procedural content kept between previews, by pattern and face size: a fine
 /// cube (faces of 2048) costs a second to evaluate and never changes.
 #[derive(Default)]
-pub struct PatternCubes(Mutex<Vec<(Pattern, usize, Arc<CubeMap<[u8; 4]>>, [bool; 6])>>);
+pub struct PatternCubes(Mutex<Vec<Kept>>);
+
+/// A kept cube: its pattern, face size, texels and which faces are evaluated.
+type Kept = (Pattern, usize, Arc<CubeMap<[u8; 4]>>, [bool; 6]);
 
 /// How many cubes are kept (each at most six 2048² faces of 8-bit RGBA, 100 MB).
 const KEPT: usize = 2;

@@ -1,8 +1,9 @@
 //! The rig routes: health, version, the rig document and its channels, and the change feed.
 
 use super::ApiError;
+use super::db::Meta;
 use super::jobs::run_write;
-use super::state::{AppState, WORKERS, if_match, tagged};
+use super::state::{AppState, AtRevision, Query, WORKERS, document_at, if_match, meta, tagged};
 use crate::rig::Rig;
 use axum::Json;
 use axum::body::Bytes;
@@ -32,16 +33,32 @@ pub async fn version() -> Json<serde_json::Value> {
     Json(serde_json::json!({"name": "omniwarp", "version": env!("CARGO_PKG_VERSION"), "api": "v1"}))
 }
 
-pub async fn get_rig(State(s): State<Arc<AppState>>) -> Response {
+pub async fn get_rig(
+    State(s): State<Arc<AppState>>,
+    Query(q): Query<AtRevision>,
+) -> Result<Response, ApiError> {
     let (rig, revision) = s.store.snapshot();
-    tagged(
-        serde_json::json!({"revision": revision, "rig": rig.doc}),
+    let (doc, revision) = match q.revision {
+        Some(r) if r != revision => (document_at(&s, "rig".into(), r).await?, r),
+        _ => (
+            serde_json::to_value(&rig.doc).expect("rigs serialise"),
+            revision,
+        ),
+    };
+    Ok(tagged(
+        serde_json::json!({"revision": revision, "rig": doc}),
         revision,
-    )
+    ))
 }
 
-/// Makes `rig` the new revision if `wanted` is still current; durable before it returns.
-pub async fn commit_rig(s: &Arc<AppState>, wanted: u64, rig: Rig) -> Result<u64, ApiError> {
+/// Makes `rig` the new revision if `wanted` is still current; durable, with its history row,
+/// before it returns. A plain write can be undone back to `wanted`.
+pub async fn commit_rig(
+    s: &Arc<AppState>,
+    wanted: u64,
+    rig: Rig,
+    mut meta: Meta,
+) -> Result<u64, ApiError> {
     let _writer = s.store.rig_writer.lock().await;
     let (_, current) = s.store.snapshot();
     if wanted != current {
@@ -50,7 +67,10 @@ pub async fn commit_rig(s: &Arc<AppState>, wanted: u64, rig: Rig) -> Result<u64,
     let revision = current + 1;
     let state = s.clone();
     let doc = rig.doc.clone();
-    tokio::task::spawn_blocking(move || state.store.save_rig(&doc, revision))
+    if matches!(meta.action, "put" | "apply") {
+        meta.undo_to = Some(current);
+    }
+    tokio::task::spawn_blocking(move || state.store.save_rig(&doc, revision, &meta))
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))??;
     s.store.install(rig, revision);
@@ -78,7 +98,7 @@ pub async fn put_rig(
         Ok(state.store.accept_rig(&text, state.options.memory_budget)?)
     })
     .await?;
-    let revision = commit_rig(&s, wanted, rig).await?;
+    let revision = commit_rig(&s, wanted, rig, meta(&s, "put", None)).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 

@@ -6,11 +6,13 @@
 
 use super::ApiError;
 use super::cache::{Computed, Geometry, GpuWarp};
+use super::db::Meta;
 use super::store::Store;
 use axum::Json;
 use axum::body::Bytes;
 use axum::http::{HeaderMap, HeaderValue, header};
 use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
 use serde::de::DeserializeOwned;
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -41,6 +43,9 @@ pub struct Options {
     pub allow_hosts: Vec<String>,
     /// Origins (`scheme://host[:port]`) beyond the daemon's own that browsers may call it from.
     pub allow_origins: Vec<String>,
+    /// Who the history records as making a change: the token's name (its file's name without
+    /// the extension) when one is required, `local` otherwise.
+    pub user: String,
 }
 
 impl Default for Options {
@@ -50,6 +55,7 @@ impl Default for Options {
             memory_budget: crate::limits::MEMORY_BUDGET,
             allow_hosts: Vec::new(),
             allow_origins: Vec::new(),
+            user: "local".into(),
         }
     }
 }
@@ -124,6 +130,17 @@ pub fn etag(revision: u64) -> HeaderValue {
 }
 
 /// A JSON response with the revision as its ETag.
+/// The history entry of a client's write: who made it, and what it was.
+pub fn meta(s: &AppState, action: &'static str, request: Option<serde_json::Value>) -> Meta {
+    Meta {
+        who: s.options.user.clone(),
+        action,
+        request,
+        undo_to: None,
+        redo_to: None,
+    }
+}
+
 pub fn tagged(body: serde_json::Value, revision: u64) -> Response {
     let mut resp = Json(body).into_response();
     resp.headers_mut().insert(header::ETAG, etag(revision));
@@ -190,4 +207,25 @@ impl<T: DeserializeOwned, S: Send + Sync> axum::extract::FromRequestParts<S> for
                 ApiError::Invalid { field, reason }
             })
     }
+}
+
+/// The document of `resource` at `revision`, 404 where the history has none.
+pub async fn document_at(
+    s: &Arc<AppState>,
+    resource: String,
+    revision: u64,
+) -> Result<serde_json::Value, ApiError> {
+    let state = s.clone();
+    let r = resource.clone();
+    tokio::task::spawn_blocking(move || state.store.db.at(&r, revision))
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))??
+        .ok_or_else(|| ApiError::NotFound(format!("{resource} has no revision {revision}")))
+}
+
+/// `?revision=N` on a resource's GET: that revision from the history instead of the current.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AtRevision {
+    pub revision: Option<u64>,
 }

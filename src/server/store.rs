@@ -1,18 +1,23 @@
 //! What the daemon holds and how it is kept: the rig (with its revision), each channel's content
 //! canvas and tile screen (each with its own revision), and calibration proposals.
 //!
-//! Every write goes through [`save`]: the previous good file is kept as `<name>.prev` and the new
-//! one is written atomically (temp file, fsync, rename, fsync dir), so an acknowledged edit
-//! survives a crash and a damaged file falls back to the last good revision. Layout under the
-//! data directory: `rig.json`, `channels/<id>.json`, `proposals/<n>.json`, `meshes/<name>.obj`
-//! (uploaded mesh screens) and `warps/` (computed warp maps, a cache).
+//! They live in memory as they are served and in SQLite ([`super::db`]) as they are kept: each
+//! write is one transaction that makes the new document current and appends it to the history,
+//! durable before the write is acknowledged. Resources are named `rig`,
+//! `channels/<id>/content` and `channels/<id>/tiles`. Under the data directory: `omniwarp.db`
+//! (with SQLite's `-wal` and `-shm`), `meshes/<name>.obj` (uploaded mesh screens) and `warps/`
+//! (computed warp maps, a cache keyed by a hash of their inputs).
 //!
-//! What is read from disk is accepted as if a client had sent it: the same validation and
-//! limits run at start-up, a file that fails them falls back to its `.prev` (the reason
-//! logged), and when both fail the daemon refuses to start unless told to `reset` — a damaged
-//! data directory is never silently replaced, not even by the demo rig.
+//! What is read back is accepted as if a client had sent it: the same validation and limits run
+//! at start-up; a document that fails them falls back to the newest earlier revision that
+//! passes (kept as a new revision, the reason logged); when none does, or the database itself is
+//! damaged, the daemon refuses to start unless told to `reset` — a damaged data directory is
+//! never silently replaced, not even by the demo rig. A data directory of the file store
+//! (0.1.0: `rig.json`, `channels/<id>.json`, `proposals/<n>.json`, each with a `.prev`) is
+//! migrated on first start; its files are moved to `migrated-0.1/`.
 
-use crate::image_io::{atomic_write, create_dir_durably, remove_leftovers};
+use super::db::{self, Db, Meta};
+use crate::image_io::{create_dir_durably, remove_leftovers};
 use crate::rig::{Rig, RigDoc};
 use crate::tiles::TileScreen;
 use serde::de::DeserializeOwned;
@@ -125,6 +130,8 @@ pub struct Proposal {
 pub struct Store {
     pub dir: Option<PathBuf>,
     pub meshes: MeshDirs,
+    /// Where everything is kept (in memory without a data directory).
+    pub db: Db,
     current: RwLock<(Arc<Rig>, u64)>,
     /// Serialises rig writers, so revision checks and durability happen in order.
     pub rig_writer: tokio::sync::Mutex<()>,
@@ -138,8 +145,8 @@ pub struct Store {
 pub struct OpenOptions {
     /// The rig to start from when the data directory holds none.
     pub initial: Option<RigDoc>,
-    /// Start from `initial` even when the data directory's files are damaged beyond their
-    /// `.prev` (the damaged files are kept beside as `<name>.damaged`).
+    /// Start from `initial` even when the data directory is damaged beyond recovery (the
+    /// damaged database or files are kept beside as `<name>.damaged`).
     pub reset: bool,
     /// Warps of all channels together may take this many bytes.
     pub memory_budget: u64,
@@ -157,24 +164,37 @@ impl Default for OpenOptions {
     }
 }
 
-/// Writes `bytes` as `dir/name`, keeping the previous file as `name.prev` when it still parses
-/// as `T` (a damaged file must not overwrite the last good one).
-pub fn save<T: DeserializeOwned>(dir: &Path, name: &str, bytes: &[u8]) -> crate::Result<()> {
-    let path = dir.join(name);
-    if let Some(parent) = path.parent() {
-        create_dir_durably(parent)?;
+/// The resource name of a channel's content canvas.
+pub fn content_resource(id: &str) -> String {
+    format!("channels/{id}/content")
+}
+
+/// The resource name of a channel's tile screen.
+pub fn tiles_resource(id: &str) -> String {
+    format!("channels/{id}/tiles")
+}
+
+/// How far back start-up looks for a revision that passes validation.
+const RECOVER_DEPTH: u64 = 16;
+
+/// The history entry of a write the daemon makes itself.
+fn by_daemon(action: &'static str) -> Meta {
+    Meta {
+        who: "omniwarp".into(),
+        action,
+        request: None,
+        undo_to: None,
+        redo_to: None,
     }
-    if let Ok(old) = std::fs::read(&path)
-        && serde_json::from_slice::<T>(&old).is_ok()
-    {
-        let prev = dir.join(format!("{name}.prev"));
-        atomic_write(&prev, |f| {
-            std::io::Write::write_all(f, &old).map_err(|e| crate::Error::file(&prev, e))
-        })?;
-    }
-    atomic_write(&path, |f| {
-        std::io::Write::write_all(f, bytes).map_err(|e| crate::Error::file(&path, e))
-    })
+}
+
+/// A kept document as `T`; a mismatch is reported like a damaged file.
+fn from_json<T: DeserializeOwned>(v: serde_json::Value) -> crate::Result<T> {
+    serde_json::from_value(v).map_err(|e| crate::Error::invalid("data", e.to_string()))
+}
+
+fn json_of(v: &impl Serialize) -> serde_json::Value {
+    serde_json::to_value(v).expect("state documents serialise")
 }
 
 /// What reading a file and its `.prev` gave.
@@ -264,76 +284,79 @@ impl Store {
             data: dir.as_ref().map(|d| d.join("meshes")),
             assets: o.assets.clone(),
         };
-        let mut loaded = Loaded::Missing;
-        if let Some(d) = &dir {
-            std::fs::create_dir_all(d).map_err(|e| crate::Error::file(d, e))?;
-            for sub in ["", "channels", "proposals", "warps", "meshes"] {
-                let n = remove_leftovers(&d.join(sub));
-                if n > 0 {
-                    tracing::warn!(dir = %d.join(sub).display(), n,
-                        "removed temporary files a killed process left");
-                }
-            }
-            loaded = load(d, "rig.json", |p| load_rig(p, &meshes, o.memory_budget));
-        }
-        let (rig, revision) = match (loaded, &o.initial) {
-            (Loaded::Found(found), _) => found,
-            (Loaded::Damaged(reasons), _) if !o.reset => {
-                return Err(damaged("rig.json", &reasons));
-            }
-            (Loaded::Damaged(_), _) => {
-                set_aside(dir.as_deref(), "rig.json");
-                match &o.initial {
-                    Some(doc) => (meshes.accept(doc.clone(), o.memory_budget)?, 1),
-                    None => {
-                        return Err(crate::Error::invalid(
-                            "data",
-                            "--reset needs a rig to start from: give --demo",
-                        ));
+        let db = match &dir {
+            Some(d) => {
+                std::fs::create_dir_all(d).map_err(|e| crate::Error::file(d, e))?;
+                for sub in ["", "warps", "meshes"] {
+                    let n = remove_leftovers(&d.join(sub));
+                    if n > 0 {
+                        tracing::warn!(dir = %d.join(sub).display(), n,
+                            "removed temporary files a killed process left");
                     }
                 }
+                let db = match Db::open(Some(&d.join(db::FILE))) {
+                    Ok(db) => db,
+                    Err(e) if o.reset => {
+                        tracing::error!(error = %e, "damaged database set aside (--reset)");
+                        for f in ["", "-wal", "-shm"] {
+                            set_aside(Some(d), &format!("{}{f}", db::FILE));
+                        }
+                        Db::open(Some(&d.join(db::FILE)))?
+                    }
+                    Err(e) => return Err(damaged(db::FILE, &[e.to_string()])),
+                };
+                migrate_files(d, &db, &meshes, &o)?;
+                db
             }
-            (_, Some(doc)) => (meshes.accept(doc.clone(), o.memory_budget)?, 1),
-            (_, None) => {
-                return Err(crate::Error::invalid(
-                    "data",
-                    "no rig in the data directory; start with --demo or put a rig.json there",
-                ));
+            None => Db::open(None)?,
+        };
+        let loaded = load_valid(&db, "rig", |v| {
+            let doc: RigDoc = from_json(v)?;
+            meshes.accept(doc, o.memory_budget)
+        })?;
+        let (rig, revision) = match loaded {
+            Loaded::Found(found) => found,
+            Loaded::Damaged(reasons) if !o.reset => return Err(damaged("the rig", &reasons)),
+            loaded => {
+                let doc = o.initial.clone().ok_or_else(|| {
+                    crate::Error::invalid(
+                        "data",
+                        if matches!(loaded, Loaded::Missing) {
+                            "no rig in the data directory; start with --demo"
+                        } else {
+                            "--reset needs a rig to start from: give --demo"
+                        },
+                    )
+                })?;
+                let rig = meshes.accept(doc, o.memory_budget)?;
+                let revision = db.current("rig")?.map_or(1, |(r, _)| r + 1);
+                let action = if revision == 1 { "create" } else { "reset" };
+                db.write(
+                    "rig",
+                    None,
+                    (revision, &json_of(&rig.doc)),
+                    &by_daemon(action),
+                )?;
+                (rig, revision)
             }
         };
         let mut channels = HashMap::new();
-        let mut proposals = HashMap::new();
-        if let Some(d) = &dir {
-            // The rig's channels are validated now, so a damaged file stops the start.
-            for ch in &rig.channels {
-                let data = match load(d, &channel_file(&ch.id), parse_channel) {
-                    Loaded::Found(data) => data,
-                    Loaded::Missing => ChannelData::default(),
-                    Loaded::Damaged(_) if o.reset => {
-                        set_aside(Some(d), &channel_file(&ch.id));
-                        ChannelData::default()
-                    }
-                    Loaded::Damaged(reasons) => {
-                        return Err(damaged(&channel_file(&ch.id), &reasons));
-                    }
-                };
-                channels.insert(ch.id.clone(), Arc::new(tokio::sync::Mutex::new(data)));
-            }
-            proposals = load_proposals(d, &rig);
+        for ch in &rig.channels {
+            let data = load_channel(&db, &ch.id, o.reset)?;
+            channels.insert(ch.id.clone(), Arc::new(tokio::sync::Mutex::new(data)));
         }
+        let proposals = load_proposals(&db, &rig);
         let next = proposals.keys().max().map_or(1, |m| m + 1);
-        let store = Store {
+        Ok(Store {
             dir,
             meshes,
+            db,
             current: RwLock::new((Arc::new(rig), revision)),
             rig_writer: tokio::sync::Mutex::new(()),
             channels: Mutex::new(channels),
             proposals: Mutex::new(proposals),
             next_proposal: AtomicU64::new(next),
-        };
-        let (rig, revision) = store.snapshot();
-        store.save_rig(&rig.doc, revision)?;
-        Ok(store)
+        })
     }
 
     /// Where mesh `name` is read from (see [`MeshDirs::path`]).
@@ -355,15 +378,9 @@ impl Store {
         (g.0.clone(), g.1)
     }
 
-    /// Durably writes the rig (blocking).
-    pub fn save_rig(&self, doc: &RigDoc, revision: u64) -> crate::Result<()> {
-        let Some(dir) = &self.dir else { return Ok(()) };
-        let bytes = serde_json::to_vec_pretty(&SavedRig {
-            revision,
-            rig: doc.clone(),
-        })
-        .expect("rigs serialise");
-        save::<SavedRig>(dir, "rig.json", &bytes)
+    /// Durably writes the rig as `revision` with its history row (blocking).
+    pub fn save_rig(&self, doc: &RigDoc, revision: u64, meta: &Meta) -> crate::Result<()> {
+        self.db.write("rig", None, (revision, &json_of(doc)), meta)
     }
 
     /// Makes `rig` current; call after [`Store::save_rig`] succeeded.
@@ -375,40 +392,37 @@ impl Store {
     }
 
     /// The editable state of channel `id` of the current rig (a channel new to the rig starts
-    /// from the defaults, or from a valid file a former rig left).
+    /// from the defaults, or from what a former rig's channel of that id left).
     pub fn channel(&self, id: &str) -> Option<Arc<tokio::sync::Mutex<ChannelData>>> {
         let (rig, _) = self.snapshot();
         rig.channel(id).ok()?;
         let mut map = self.channels.lock().expect("channel map lock");
         let entry = map.entry(id.to_string()).or_insert_with(|| {
-            let data = match self
-                .dir
-                .as_ref()
-                .map(|d| load(d, &channel_file(id), parse_channel))
-            {
-                Some(Loaded::Found(data)) => data,
-                _ => ChannelData::default(),
-            };
+            let data = load_channel(&self.db, id, true).unwrap_or_default();
             Arc::new(tokio::sync::Mutex::new(data))
         });
         Some(entry.clone())
     }
 
-    /// Durably writes a channel's state (blocking).
-    pub fn save_channel(&self, id: &str, data: &ChannelData) -> crate::Result<()> {
-        let Some(dir) = &self.dir else { return Ok(()) };
-        let bytes = serde_json::to_vec(data).expect("channel state serialises");
-        save::<ChannelData>(dir, &channel_file(id), &bytes)
+    /// Durably writes one of a channel's documents (`resource`, from [`content_resource`] or
+    /// [`tiles_resource`]) with its history row (blocking); `before` is the revision it
+    /// replaces, recorded first when the channel still had its defaults.
+    pub fn save_doc(
+        &self,
+        resource: &str,
+        before: (u64, &serde_json::Value),
+        after: (u64, &serde_json::Value),
+        meta: &Meta,
+    ) -> crate::Result<()> {
+        self.db.write(resource, Some(before), after, meta)
     }
 
     pub fn save_proposal(&self, p: &Proposal) -> crate::Result<()> {
-        let Some(dir) = &self.dir else { return Ok(()) };
-        let bytes = serde_json::to_vec_pretty(p).expect("proposals serialise");
-        save::<Proposal>(dir, &format!("proposals/{}.json", p.id), &bytes)
+        self.db.put_proposal(p.id, &json_of(p))
     }
 
-    /// Keeps `p` and drops the oldest proposals beyond [`crate::limits::PROPOSALS`] (their
-    /// files too); returns the ids dropped.
+    /// Keeps `p` and drops the oldest proposals beyond [`crate::limits::PROPOSALS`] (from the
+    /// database too); returns the ids dropped.
     pub fn keep_proposal(&self, p: Proposal) -> Vec<u64> {
         let mut map = self.proposals.lock().expect("proposal lock");
         map.insert(p.id, Arc::new(p));
@@ -418,14 +432,175 @@ impl Store {
         let dropped: Vec<u64> = ids[..excess].to_vec();
         for id in &dropped {
             map.remove(id);
-            if let Some(d) = &self.dir {
-                for f in [format!("{id}.json"), format!("{id}.json.prev")] {
-                    let _ = std::fs::remove_file(d.join("proposals").join(f));
-                }
+            if let Err(e) = self.db.delete_proposal(*id) {
+                tracing::error!(id, error = %e, "could not drop a proposal");
             }
         }
         dropped
     }
+}
+
+/// The newest revision of `resource` that `accept` takes, looking back [`RECOVER_DEPTH`]
+/// revisions; an older one found is written as a new revision so the history stays a line.
+fn load_valid<T>(
+    db: &Db,
+    resource: &str,
+    accept: impl Fn(serde_json::Value) -> crate::Result<T>,
+) -> crate::Result<Loaded<(T, u64)>> {
+    let Some((current, latest)) = db.current(resource)? else {
+        return Ok(Loaded::Missing);
+    };
+    let mut reasons = Vec::new();
+    for back in 0..=RECOVER_DEPTH.min(current.saturating_sub(1)) {
+        let revision = current - back;
+        let doc = if back == 0 {
+            Some(latest.clone())
+        } else {
+            db.at(resource, revision)?
+        };
+        let Some(doc) = doc else { break };
+        match accept(doc.clone()) {
+            Ok(v) if back == 0 => return Ok(Loaded::Found((v, current))),
+            Ok(v) => {
+                tracing::error!(resource, revision, "recovered an earlier revision");
+                db.write(resource, None, (current + 1, &doc), &by_daemon("recover"))?;
+                return Ok(Loaded::Found((v, current + 1)));
+            }
+            Err(e) => {
+                tracing::error!(resource, revision, error = %e,
+                    "refused on loading; trying the revision before");
+                reasons.push(format!("{resource} revision {revision}: {e}"));
+            }
+        }
+    }
+    Ok(Loaded::Damaged(reasons))
+}
+
+/// A channel's state from the database, validated as a PUT of its content and tiles would be;
+/// the defaults where nothing is kept (or, with `reset`, where nothing kept is valid).
+fn load_channel(db: &Db, id: &str, reset: bool) -> crate::Result<ChannelData> {
+    let mut data = ChannelData::default();
+    let content = load_valid(db, &content_resource(id), |v| {
+        let c: Canvas = from_json(v)?;
+        c.view()?;
+        Ok(c)
+    })?;
+    match content {
+        Loaded::Found((value, revision)) => data.content = Versioned { revision, value },
+        Loaded::Damaged(reasons) if !reset => {
+            return Err(damaged(&content_resource(id), &reasons));
+        }
+        Loaded::Damaged(_) => {
+            data.content.revision = restart(db, &content_resource(id), &data.content.value)?;
+        }
+        Loaded::Missing => {}
+    }
+    let tiles = load_valid(db, &tiles_resource(id), |v| {
+        let t: Option<TileScreen> = from_json(v)?;
+        if let Some(t) = &t {
+            t.validate()?;
+        }
+        Ok(t)
+    })?;
+    match tiles {
+        Loaded::Found((value, revision)) => data.tiles = Versioned { revision, value },
+        Loaded::Damaged(reasons) if !reset => {
+            return Err(damaged(&tiles_resource(id), &reasons));
+        }
+        Loaded::Damaged(_) => {
+            data.tiles.revision = restart(db, &tiles_resource(id), &data.tiles.value)?;
+        }
+        Loaded::Missing => {}
+    }
+    Ok(data)
+}
+
+/// Writes `value` (a default) as the next revision of a resource none of whose kept revisions
+/// is valid (`--reset`); the damaged ones stay in the history.
+fn restart(db: &Db, resource: &str, value: &impl Serialize) -> crate::Result<u64> {
+    let next = db.current(resource)?.map_or(1, |(r, _)| r + 1);
+    tracing::warn!(
+        resource,
+        revision = next,
+        "started again from the defaults (--reset)"
+    );
+    db.write(resource, None, (next, &json_of(value)), &by_daemon("reset"))?;
+    Ok(next)
+}
+
+/// Moves a data directory of the file store (0.1.0) into the database, once: its rig, channel
+/// files and proposals (each read with its `.prev` fallback and validated as before) become
+/// revisions of the same numbers, and the files move to `migrated-0.1/` afterwards (a start
+/// killed in between finds the database done and moves them then).
+fn migrate_files(dir: &Path, db: &Db, meshes: &MeshDirs, o: &OpenOptions) -> crate::Result<()> {
+    let done = db.meta("migrated-0.1")?.is_some();
+    if !done && dir.join("rig.json").exists() && db.current("rig")?.is_none() {
+        let loaded = load(dir, "rig.json", |p| load_rig(p, meshes, o.memory_budget));
+        let (rig, revision) = match loaded {
+            Loaded::Found(found) => found,
+            Loaded::Damaged(reasons) if !o.reset => return Err(damaged("rig.json", &reasons)),
+            _ => {
+                set_aside(Some(dir), "rig.json");
+                return Ok(());
+            }
+        };
+        let migrate = by_daemon("migrate");
+        db.write("rig", None, (revision, &json_of(&rig.doc)), &migrate)?;
+        for ch in &rig.channels {
+            let data = match load(dir, &channel_file(&ch.id), parse_channel) {
+                Loaded::Found(data) => data,
+                Loaded::Missing => continue,
+                Loaded::Damaged(reasons) if !o.reset => {
+                    return Err(damaged(&channel_file(&ch.id), &reasons));
+                }
+                Loaded::Damaged(_) => {
+                    set_aside(Some(dir), &channel_file(&ch.id));
+                    continue;
+                }
+            };
+            let (c, t) = (&data.content, &data.tiles);
+            let content = (c.revision, &json_of(&c.value));
+            db.write(&content_resource(&ch.id), None, content, &migrate)?;
+            let tiles = (t.revision, &json_of(&t.value));
+            db.write(&tiles_resource(&ch.id), None, tiles, &migrate)?;
+        }
+        for (id, p) in file_proposals(dir) {
+            db.put_proposal(id, &p)?;
+        }
+        db.set_meta("migrated-0.1", "done")?;
+        tracing::info!(dir = %dir.display(), "file store migrated into the database");
+    }
+    if db.meta("migrated-0.1")?.is_some() {
+        let to = dir.join("migrated-0.1");
+        for name in ["rig.json", "rig.json.prev", "channels", "proposals"] {
+            let from = dir.join(name);
+            if from.exists() {
+                create_dir_durably(&to)?;
+                std::fs::rename(&from, to.join(name)).map_err(|e| crate::Error::file(&from, e))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The proposals of a file store's `proposals/` directory, as JSON.
+fn file_proposals(dir: &Path) -> Vec<(u64, serde_json::Value)> {
+    let Ok(entries) = std::fs::read_dir(dir.join("proposals")) else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .filter_map(|p| match parse_json::<Proposal>(&p) {
+            Ok(v) => Some((v.id, json_of(&v))),
+            Err(e) => {
+                tracing::error!(file = %p.display(), error = %e,
+                    "proposal left out of the migration");
+                None
+            }
+        })
+        .collect()
 }
 
 /// Keeps a damaged file and its `.prev` as `<name>.damaged` and `<name>.prev.damaged`, for
@@ -471,19 +646,16 @@ fn parse_channel(path: &Path) -> crate::Result<ChannelData> {
     Ok(data)
 }
 
-/// The proposals kept under `dir/proposals`, each one checked by putting its channel into `rig`
+/// The proposals kept in the database, each one checked by putting its channel into `rig`
 /// (refused ones are logged and left out), the newest [`crate::limits::PROPOSALS`] only.
-fn load_proposals(dir: &Path, rig: &Rig) -> HashMap<u64, Arc<Proposal>> {
+fn load_proposals(db: &Db, rig: &Rig) -> HashMap<u64, Arc<Proposal>> {
     let mut found = HashMap::new();
-    let Ok(entries) = std::fs::read_dir(dir.join("proposals")) else {
-        return found;
-    };
-    for e in entries.flatten() {
-        let path = e.path();
-        if path.extension().is_none_or(|x| x != "json") {
-            continue;
-        }
-        let checked = parse_json::<Proposal>(&path).and_then(|p| {
+    let kept = db.proposals().unwrap_or_else(|e| {
+        tracing::error!(error = %e, "proposals unreadable");
+        Vec::new()
+    });
+    for (id, doc) in kept {
+        let checked = from_json::<Proposal>(doc).and_then(|p| {
             let mut doc = rig.doc.clone();
             if let Some(slot) = doc.channels.iter_mut().find(|c| c.id == p.channel) {
                 *slot = p.proposed.clone();
@@ -495,9 +667,7 @@ fn load_proposals(dir: &Path, rig: &Rig) -> HashMap<u64, Arc<Proposal>> {
             Ok(p) => {
                 found.insert(p.id, Arc::new(p));
             }
-            Err(e) => {
-                tracing::error!(file = %path.display(), error = %e, "proposal refused on loading")
-            }
+            Err(e) => tracing::error!(id, error = %e, "proposal refused on loading"),
         }
     }
     let mut ids: Vec<u64> = found.keys().copied().collect();

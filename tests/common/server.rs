@@ -99,3 +99,10 @@ pub fn start_with(data: &Path, demo: bool, extra: &[&str]) -> (Child, SocketAddr
         .unwrap();
     (child, addr)
 }
+
+/// What the data directory's database holds as the current revision of `resource`.
+#[allow(dead_code)]
+pub fn stored(data: &Path, resource: &str) -> Option<(u64, serde_json::Value)> {
+    let db = omniwarp::server::db::Db::open(Some(&data.join(omniwarp::server::db::FILE))).unwrap();
+    db.current(resource).unwrap()
+}

@@ -1,0 +1,420 @@
+//! The daemon's state in SQLite: every resource's current document, and its history.
+//!
+//! Why SQLite: every acknowledged write must be durable and must append to a history in the
+//! same breath, so undo and "what did revision 40 look like" survive a crash; a process killed
+//! between two files (the old store wrote `rig.json` and its `.prev`) cannot happen inside one
+//! transaction. SQLite gives that with WAL and `synchronous = FULL` (a commit is on disk when it
+//! returns), one file, no server, and its own integrity check; the bundled build needs no system
+//! library. A log of JSON files would need our own compaction, index and recovery.
+//!
+//! Tables: `resources` (name → revision, document) is what the daemon serves; `history` has a
+//! row per revision of each resource (who, when, what was asked, the RFC 6902 patch from the
+//! revision before, a full document every [`SNAPSHOT_EVERY`] revisions, and the undo/redo
+//! targets); `proposals` the calibration proposals. A revision's document is rebuilt from the
+//! nearest snapshot at or before it and the patches after, so 100,000 edits of one feature
+//! cost their patches, not 100,000 copies of the screen.
+
+use rusqlite::{Connection, OptionalExtension, params};
+use serde_json::Value;
+use std::path::Path;
+use std::sync::Mutex;
+
+/// A full document is kept every this many revisions of a resource (and whenever the patch
+/// would be larger than the document).
+pub const SNAPSHOT_EVERY: u64 = 64;
+
+/// The database file under the data directory.
+pub const FILE: &str = "omniwarp.db";
+
+const SCHEMA: &str = "
+    CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+    CREATE TABLE IF NOT EXISTS resources (
+        name TEXT PRIMARY KEY, revision INTEGER NOT NULL, document TEXT NOT NULL);
+    CREATE TABLE IF NOT EXISTS history (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        resource TEXT NOT NULL, revision INTEGER NOT NULL,
+        at_ms INTEGER NOT NULL, who TEXT NOT NULL, action TEXT NOT NULL,
+        request TEXT, patch TEXT, snapshot TEXT,
+        undo_to INTEGER, redo_to INTEGER,
+        UNIQUE (resource, revision));
+    CREATE TABLE IF NOT EXISTS proposals (id INTEGER PRIMARY KEY, document TEXT NOT NULL);
+";
+
+/// One row of the history, as listed.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Row {
+    pub seq: i64,
+    pub resource: String,
+    pub revision: u64,
+    /// Milliseconds since the Unix epoch.
+    pub at_ms: i64,
+    pub who: String,
+    /// create, migrate, put, patch, delete, apply, revert, undo or redo.
+    pub action: String,
+    /// What the client sent when it is small (a PATCH's edits, a revert's revision).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub request: Option<Value>,
+    /// The revision an undo from this one goes back to.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub undo_to: Option<u64>,
+    /// The revision a redo from this one goes forward to.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub redo_to: Option<u64>,
+}
+
+/// What a write records besides the document.
+#[derive(Debug, Clone)]
+pub struct Meta {
+    pub who: String,
+    pub action: &'static str,
+    pub request: Option<Value>,
+    pub undo_to: Option<u64>,
+    pub redo_to: Option<u64>,
+}
+
+pub struct Db {
+    conn: Mutex<Connection>,
+}
+
+fn fail(e: impl std::fmt::Display + 'static) -> crate::Error {
+    crate::Error::file(FILE, e)
+}
+
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+impl Db {
+    /// Opens (or creates) the database at `path`, in memory without one; a file that is not a
+    /// sound SQLite database is an error, never replaced.
+    pub fn open(path: Option<&Path>) -> crate::Result<Db> {
+        let conn = match path {
+            Some(p) => Connection::open(p).map_err(fail)?,
+            None => Connection::open_in_memory().map_err(fail)?,
+        };
+        conn.busy_timeout(std::time::Duration::from_secs(5))
+            .map_err(fail)?;
+        conn.pragma_update(None, "journal_mode", "WAL")
+            .map_err(fail)?;
+        conn.pragma_update(None, "synchronous", "FULL")
+            .map_err(fail)?;
+        let ok: String = conn
+            .query_row("PRAGMA quick_check", [], |r| r.get(0))
+            .map_err(fail)?;
+        if ok != "ok" {
+            return Err(fail(format!("integrity check failed: {ok}")));
+        }
+        conn.execute_batch(SCHEMA).map_err(fail)?;
+        Ok(Db {
+            conn: Mutex::new(conn),
+        })
+    }
+
+    fn conn(&self) -> std::sync::MutexGuard<'_, Connection> {
+        self.conn.lock().expect("no query panics")
+    }
+
+    pub fn meta(&self, key: &str) -> crate::Result<Option<String>> {
+        self.conn()
+            .query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
+            .optional()
+            .map_err(fail)
+    }
+
+    pub fn set_meta(&self, key: &str, value: &str) -> crate::Result<()> {
+        self.conn()
+            .execute(
+                "INSERT OR REPLACE INTO meta (key, value) VALUES (?1, ?2)",
+                params![key, value],
+            )
+            .map(|_| ())
+            .map_err(fail)
+    }
+
+    /// The current revision and document of `resource`.
+    pub fn current(&self, resource: &str) -> crate::Result<Option<(u64, Value)>> {
+        let row: Option<(i64, String)> = self
+            .conn()
+            .query_row(
+                "SELECT revision, document FROM resources WHERE name = ?1",
+                [resource],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(fail)?;
+        row.map(|(rev, doc)| Ok((rev as u64, serde_json::from_str(&doc).map_err(fail)?)))
+            .transpose()
+    }
+
+    /// Makes `after` the current document of `resource` and appends it to the history, in one
+    /// transaction. `before` is the document it replaces: written first as a `create` row when
+    /// the resource has no row yet (a channel's defaults), so every revision can be rebuilt.
+    pub fn write(
+        &self,
+        resource: &str,
+        before: Option<(u64, &Value)>,
+        after: (u64, &Value),
+        meta: &Meta,
+    ) -> crate::Result<()> {
+        let mut conn = self.conn();
+        let tx = conn.transaction().map_err(fail)?;
+        let stored: Option<(i64, String)> = tx
+            .query_row(
+                "SELECT revision, document FROM resources WHERE name = ?1",
+                [resource],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(fail)?;
+        let previous: Option<(u64, Value)> = match (stored, before) {
+            (Some((rev, doc)), _) => Some((rev as u64, serde_json::from_str(&doc).map_err(fail)?)),
+            (None, Some((rev, doc))) => {
+                insert_row(
+                    &tx,
+                    resource,
+                    rev,
+                    None,
+                    doc,
+                    &Meta {
+                        who: "omniwarp".into(),
+                        action: "create",
+                        request: None,
+                        undo_to: None,
+                        redo_to: None,
+                    },
+                )?;
+                Some((rev, doc.clone()))
+            }
+            (None, None) => None,
+        };
+        insert_row(
+            &tx,
+            resource,
+            after.0,
+            previous.as_ref().map(|(r, d)| (*r, d)),
+            after.1,
+            meta,
+        )?;
+        tx.execute(
+            "INSERT OR REPLACE INTO resources (name, revision, document) VALUES (?1, ?2, ?3)",
+            params![resource, after.0 as i64, after.1.to_string()],
+        )
+        .map_err(fail)?;
+        tx.commit().map_err(fail)
+    }
+
+    /// The document of `resource` at `revision`, rebuilt from its history.
+    pub fn at(&self, resource: &str, revision: u64) -> crate::Result<Option<Value>> {
+        let conn = self.conn();
+        let base: Option<(i64, String)> = conn
+            .query_row(
+                "SELECT revision, snapshot FROM history WHERE resource = ?1 AND revision <= ?2
+                 AND snapshot IS NOT NULL ORDER BY revision DESC LIMIT 1",
+                params![resource, revision as i64],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(fail)?;
+        let exists: bool = conn
+            .query_row(
+                "SELECT COUNT(*) FROM history WHERE resource = ?1 AND revision = ?2",
+                params![resource, revision as i64],
+                |r| r.get::<_, i64>(0),
+            )
+            .map_err(fail)?
+            > 0;
+        let Some((from, snapshot)) = base.filter(|_| exists) else {
+            return Ok(None);
+        };
+        let mut doc: Value = serde_json::from_str(&snapshot).map_err(fail)?;
+        let mut st = conn
+            .prepare(
+                "SELECT patch FROM history WHERE resource = ?1 AND revision > ?2
+                 AND revision <= ?3 ORDER BY revision",
+            )
+            .map_err(fail)?;
+        let patches = st
+            .query_map(params![resource, from, revision as i64], |r| {
+                r.get::<_, Option<String>>(0)
+            })
+            .map_err(fail)?;
+        for p in patches {
+            let p = p
+                .map_err(fail)?
+                .ok_or_else(|| fail("a history row lost its patch"))?;
+            let patch: json_patch::Patch = serde_json::from_str(&p).map_err(fail)?;
+            json_patch::patch(&mut doc, &patch).map_err(fail)?;
+        }
+        Ok(Some(doc))
+    }
+
+    /// The patch that made `revision` of `resource` from the one before (`None` for the first
+    /// row, or where only a snapshot was kept).
+    pub fn patch_of(
+        &self,
+        resource: &str,
+        revision: u64,
+    ) -> crate::Result<Option<json_patch::Patch>> {
+        let p: Option<Option<String>> = self
+            .conn()
+            .query_row(
+                "SELECT patch FROM history WHERE resource = ?1 AND revision = ?2",
+                params![resource, revision as i64],
+                |r| r.get(0),
+            )
+            .optional()
+            .map_err(fail)?;
+        p.flatten()
+            .map(|p| serde_json::from_str(&p).map_err(fail))
+            .transpose()
+    }
+
+    /// One history row.
+    pub fn row(&self, resource: &str, revision: u64) -> crate::Result<Option<Row>> {
+        let conn = self.conn();
+        conn.query_row(
+            &format!("{SELECT_ROW} WHERE resource = ?1 AND revision = ?2"),
+            params![resource, revision as i64],
+            read_row,
+        )
+        .optional()
+        .map_err(fail)
+    }
+
+    /// The newest `limit` rows (of `resource` only, when given), newest first, older than
+    /// `before` (a `seq`) when given.
+    pub fn history(
+        &self,
+        resource: Option<&str>,
+        limit: usize,
+        before: Option<i64>,
+    ) -> crate::Result<Vec<Row>> {
+        let conn = self.conn();
+        let mut st = conn
+            .prepare(&format!(
+                "{SELECT_ROW} WHERE (?1 IS NULL OR resource = ?1) AND (?2 IS NULL OR seq < ?2)
+                 ORDER BY seq DESC LIMIT ?3"
+            ))
+            .map_err(fail)?;
+        st.query_map(params![resource, before, limit as i64], read_row)
+            .map_err(fail)?
+            .collect::<Result<_, _>>()
+            .map_err(fail)
+    }
+
+    /// Rows and bytes the history holds (for the benchmark and the health route).
+    pub fn size(&self) -> crate::Result<(u64, u64)> {
+        let conn = self.conn();
+        let rows: i64 = conn
+            .query_row("SELECT COUNT(*) FROM history", [], |r| r.get(0))
+            .map_err(fail)?;
+        let bytes: i64 = conn
+            .query_row(
+                "SELECT COALESCE(SUM(LENGTH(patch)), 0) + COALESCE(SUM(LENGTH(snapshot)), 0)
+                 + COALESCE(SUM(LENGTH(request)), 0) FROM history",
+                [],
+                |r| r.get(0),
+            )
+            .map_err(fail)?;
+        Ok((rows as u64, bytes as u64))
+    }
+
+    pub fn put_proposal(&self, id: u64, doc: &Value) -> crate::Result<()> {
+        self.conn()
+            .execute(
+                "INSERT OR REPLACE INTO proposals (id, document) VALUES (?1, ?2)",
+                params![id as i64, doc.to_string()],
+            )
+            .map(|_| ())
+            .map_err(fail)
+    }
+
+    pub fn delete_proposal(&self, id: u64) -> crate::Result<()> {
+        self.conn()
+            .execute("DELETE FROM proposals WHERE id = ?1", [id as i64])
+            .map(|_| ())
+            .map_err(fail)
+    }
+
+    pub fn proposals(&self) -> crate::Result<Vec<(u64, Value)>> {
+        let conn = self.conn();
+        let mut st = conn
+            .prepare("SELECT id, document FROM proposals ORDER BY id")
+            .map_err(fail)?;
+        let rows = st
+            .query_map([], |r| Ok((r.get::<_, i64>(0)?, r.get::<_, String>(1)?)))
+            .map_err(fail)?;
+        let mut out = Vec::new();
+        for r in rows {
+            let (id, doc) = r.map_err(fail)?;
+            match serde_json::from_str(&doc) {
+                Ok(v) => out.push((id as u64, v)),
+                Err(e) => tracing::error!(id, error = %e, "proposal unreadable, left out"),
+            }
+        }
+        Ok(out)
+    }
+}
+
+const SELECT_ROW: &str =
+    "SELECT seq, resource, revision, at_ms, who, action, request, undo_to, redo_to FROM history";
+
+fn read_row(r: &rusqlite::Row) -> rusqlite::Result<Row> {
+    let request: Option<String> = r.get(6)?;
+    Ok(Row {
+        seq: r.get(0)?,
+        resource: r.get(1)?,
+        revision: r.get::<_, i64>(2)? as u64,
+        at_ms: r.get(3)?,
+        who: r.get(4)?,
+        action: r.get(5)?,
+        request: request.and_then(|t| serde_json::from_str(&t).ok()),
+        undo_to: r.get::<_, Option<i64>>(7)?.map(|v| v as u64),
+        redo_to: r.get::<_, Option<i64>>(8)?.map(|v| v as u64),
+    })
+}
+
+/// Appends revision `revision` of `resource`: the patch from `previous`, and a snapshot where
+/// one is due (the first row, every [`SNAPSHOT_EVERY`] revisions, a patch above the document).
+fn insert_row(
+    tx: &rusqlite::Transaction,
+    resource: &str,
+    revision: u64,
+    previous: Option<(u64, &Value)>,
+    doc: &Value,
+    meta: &Meta,
+) -> crate::Result<()> {
+    let text = doc.to_string();
+    let patch = previous
+        .map(|(_, p)| serde_json::to_string(&json_patch::diff(p, doc)).expect("patches serialise"));
+    let snapshot = match (&patch, previous) {
+        (Some(p), Some((prev, _)))
+            if !revision.is_multiple_of(SNAPSHOT_EVERY)
+                && p.len() < text.len()
+                && prev + 1 == revision =>
+        {
+            None
+        }
+        _ => Some(text),
+    };
+    tx.execute(
+        "INSERT INTO history (resource, revision, at_ms, who, action, request, patch, snapshot,
+         undo_to, redo_to) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
+        params![
+            resource,
+            revision as i64,
+            now_ms(),
+            meta.who,
+            meta.action,
+            meta.request.as_ref().map(|v| v.to_string()),
+            patch,
+            snapshot,
+            meta.undo_to.map(|v| v as i64),
+            meta.redo_to.map(|v| v as i64),
+        ],
+    )
+    .map_err(fail)?;
+    Ok(())
+}
