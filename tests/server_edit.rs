@@ -1076,3 +1076,122 @@ async fn default_previews_have_no_cube_stair_steps() {
     // Measured: 39.9 dB against 33.3 dB.
     assert!(d > 37.0 && d > c + 5.0, "default {d} dB, 256 {c} dB");
 }
+
+/// Every edit op on a channel whose screen straddles the wall's edge (the demo rig's `right`
+/// projector reaches past the +135° end and over the top and bottom edges): the lit pixels stay
+/// the exact warp's within 1 %, and the ops that keep the warp (insertions, smoothing, reset,
+/// subdivision, coarsening, refinement) keep it within 0.5°; the refinement ops within 0.01°.
+#[tokio::test]
+async fn every_edit_op_keeps_the_wall_edge_of_a_straddling_screen() {
+    let demo = state_with(
+        None,
+        None,
+        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+    );
+    let (_, _, exact) = call(&demo, get("/v1/channels/right/warp.exr")).await;
+    let (_, _, sampled) = call(&demo, get("/v1/channels/right/tiles")).await;
+    let t = json(&sampled)["tiles"]["layout"].clone();
+    let outside = t["features"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["outside"] == true)
+        .count();
+    assert!(
+        outside > 20,
+        "the screen straddles the edge: {outside} features past it"
+    );
+    let theta = t["features"][9 * 33 + 20]["theta"].as_f64().unwrap();
+    // A planar region looking where the tiles of columns 26–28, rows 12–14 look.
+    let angle =
+        |k: usize, l: usize, a: &str| t["features"][l * 33 + k][a].as_f64().unwrap().to_radians();
+    let (phi, th) = (angle(27, 13, "phi"), angle(27, 13, "theta"));
+    let look = [th.cos() * phi.sin(), th.sin(), -th.cos() * phi.cos()];
+    let hfov = (angle(28, 13, "phi") - angle(26, 13, "phi"))
+        .to_degrees()
+        .abs();
+    let ops = [
+        (
+            serde_json::json!({"op": "set_feature", "column": 20, "row": 9, "theta": theta + 0.2}),
+            0.5,
+        ),
+        (
+            serde_json::json!({"op": "set_region", "columns": [26, 28], "rows": [12, 14], "source": {"projection": "flat", "params": {"hfov": hfov}, "look_to": look, "aspect": 1.0}}),
+            f64::INFINITY,
+        ),
+        (serde_json::json!({"op": "insert_row", "at": 1}), 0.5),
+        (serde_json::json!({"op": "insert_column", "at": 32}), 0.5),
+        (
+            serde_json::json!({"op": "remove_row", "at": 9}),
+            f64::INFINITY,
+        ),
+        (
+            serde_json::json!({"op": "remove_column", "at": 31}),
+            f64::INFINITY,
+        ),
+        (serde_json::json!({"op": "smooth", "iterations": 3}), 0.5),
+        (serde_json::json!({"op": "reset"}), 0.5),
+        (serde_json::json!({"op": "subdivide"}), 0.01),
+        (
+            serde_json::json!({"op": "coarsen", "tolerance": 0.005}),
+            0.01,
+        ),
+        (serde_json::json!({"op": "refine", "tolerance": 0.002}), 0.5),
+    ];
+    // The sampled grid's own warp: what the warp-keeping ops are held to.
+    let noop = edits(serde_json::json!([{"op": "set_feature", "column": 0, "row": 0, "f": 1.0}]));
+    let (st, _, _) = call(
+        &demo,
+        write("PATCH", "/v1/channels/right/tiles", Some(1), noop),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK);
+    let (_, _, grid) = call(&demo, get("/v1/channels/right/warp.exr")).await;
+    let mut revision = 2;
+    for (op, keeps) in ops {
+        // From the sampled geometry each time.
+        let (st, _, _) = call(
+            &demo,
+            write(
+                "DELETE",
+                "/v1/channels/right/tiles",
+                Some(revision),
+                String::new(),
+            ),
+        )
+        .await;
+        assert_eq!(st, StatusCode::OK);
+        revision += 1;
+        let (st, _, body) = call(
+            &demo,
+            write(
+                "PATCH",
+                "/v1/channels/right/tiles",
+                Some(revision),
+                edits(serde_json::json!([op.clone()])),
+            ),
+        )
+        .await;
+        assert_eq!(
+            st,
+            StatusCode::OK,
+            "{op}: {}",
+            String::from_utf8_lossy(&body)
+        );
+        revision += 1;
+        let (_, _, warp) = call(&demo, get("/v1/channels/right/warp.exr")).await;
+        let (_, lit_exact, lit) = compare_warps(&exact, &warp);
+        let changed = (lit as f64 / lit_exact as f64 - 1.0).abs();
+        let (moved, _, _) = compare_warps(&grid, &warp);
+        eprintln!(
+            "{op}: {moved:.4}° from the sampled grid, lit {:+.3} %",
+            100.0 * changed
+        );
+        assert!(
+            changed < 0.01,
+            "{op}: {:.2} % of the lit pixels changed",
+            100.0 * changed
+        );
+        assert!(moved <= keeps, "{op}: the warp moved by {moved}°");
+    }
+}

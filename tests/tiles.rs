@@ -117,6 +117,7 @@ fn longitude_wrap_around_does_not_tear() {
         f: 1.0,
         valid: true,
         outside: false,
+        weight: 1.0,
     };
     let t = TileScreen::grid(
         2,
@@ -236,6 +237,7 @@ fn feat(x: f64, y: f64) -> Feature {
         f: 1.0,
         valid: true,
         outside: false,
+        weight: 1.0,
     }
 }
 
@@ -472,6 +474,7 @@ fn seed_weaknesses_are_measured() {
                 f: 1.0,
                 valid: true,
                 outside: false,
+                weight: 1.0,
             });
         }
     }
@@ -565,5 +568,177 @@ fn a_fisheye_screen_is_cut_by_its_image_circle() {
     assert_eq!(
         differ, 0,
         "pixels where the tiled and the direct fisheye disagree on coverage"
+    );
+}
+
+/// Largest angle between two screens' warps at `w` × `h`, and whether they cover the same
+/// pixels.
+fn warp_change(a: &TileScreen, b: &TileScreen, w: usize, h: usize) -> (f64, bool) {
+    let (ma, mb) = (a.feature_map(w, h), b.feature_map(w, h));
+    let same = ma
+        .data
+        .iter()
+        .zip(&mb.data)
+        .all(|(p, q)| p.is_some() == q.is_some());
+    let worst = ma
+        .data
+        .iter()
+        .zip(&mb.data)
+        .filter_map(|(p, q)| Some(p.as_ref()?.0.angle_between(q.as_ref()?.0).to_degrees()))
+        .fold(0.0, f64::max);
+    (worst, same)
+}
+
+/// Refinement keeps the warp (issue 14, item 2): subdividing the whole grid or a region, of a
+/// sampled screen and of an edited one, moves no pixel by more than 0.01°; coarsening removes
+/// what the tolerance allows and nothing more; refining a coarse screen brings it within its
+/// tolerance of the projection, and an edit survives it.
+#[test]
+fn subdivision_coarsening_and_refinement_keep_the_warp() {
+    let (w, h) = (960, 480);
+    let src = source("fisheye", params(None, None, Some(200.0)), w, h);
+    // Tiles of about 6° (a 200° fisheye on 33 × 17): direction interpolation is reproduced to
+    // third order in the tile's angle (measured 0.215° with tiles of 12.5° × 25°).
+    let base = build::from_source(&src, 33, 17).unwrap();
+    let edited = base
+        .edit(&Edit::SetFeature {
+            column: 16,
+            row: 8,
+            phi: Some(3.0),
+            theta: Some(1.5),
+            scale: None,
+            f: Some(0.5),
+        })
+        .unwrap();
+    for screen in [&base, &edited] {
+        let finer = screen
+            .edit(&Edit::Subdivide {
+                columns: None,
+                rows: None,
+            })
+            .unwrap();
+        let (worst, same) = warp_change(screen, &finer, w, h);
+        eprintln!("subdivide the whole grid: {worst:.2e}°");
+        assert!(same, "the same pixels are covered");
+        assert!(worst < 0.01, "subdivision moved the warp by {worst}°");
+    }
+    // A region alone: its new rows and columns cross tiles that cannot be split exactly; where
+    // that would move the fisheye's warp it is refused, saying by how much.
+    let region = Edit::Subdivide {
+        columns: Some((6, 18)),
+        rows: Some((4, 10)),
+    };
+    let why = base.edit(&region).unwrap_err().to_string();
+    assert!(why.contains("whole grid") && why.contains('°'), "{why}");
+    // On a cylinder interpolated in angles (longitude by column, latitude by row: no tile
+    // twists) the region is split and the warp kept; in directions it would move 0.017°.
+    let mut cylinder = build::from_source(
+        &source("cylindrical", params(Some(120.0), Some(50.0), None), w, h),
+        33,
+        17,
+    )
+    .unwrap();
+    cylinder.interpolation = Interpolation::Angles;
+    let finer = cylinder.edit(&region).unwrap();
+    let (worst, same) = warp_change(&cylinder, &finer, w, h);
+    eprintln!("subdivide a region of a cylinder: {worst:.2e}°");
+    assert!(same && worst < 0.01, "{worst}°");
+    let fine = base
+        .edit(&Edit::Subdivide {
+            columns: None,
+            rows: None,
+        })
+        .unwrap();
+    let coarse = fine
+        .edit(&Edit::Coarsen {
+            tolerance: Some(0.05),
+        })
+        .unwrap();
+    let (worst, same) = warp_change(&fine, &coarse, w, h);
+    eprintln!(
+        "coarsen: {} → {} features, {worst:.3}°",
+        fine.feature_count(),
+        coarse.feature_count()
+    );
+    assert!(same && worst <= 0.05, "{worst}°");
+    assert!(coarse.feature_count() < fine.feature_count());
+    // A projection linear in its angles needs no inner features at all.
+    let flat = build::from_source(
+        &source("equirect", params(Some(120.0), Some(60.0), None), 400, 200),
+        9,
+        5,
+    )
+    .unwrap();
+    let mut flat = flat;
+    flat.interpolation = Interpolation::Angles;
+    let bare = flat.edit(&Edit::Coarsen { tolerance: None }).unwrap();
+    assert_eq!(bare.feature_count(), 4);
+
+    // Refining a coarse screen towards its projection.
+    let truth = src.view().unwrap();
+    let coarse = build::from_source(&src, 5, 3).unwrap();
+    let refined = coarse
+        .edit(&Edit::Refine {
+            tolerance: Some(0.2),
+            max_features: Some(5000),
+        })
+        .unwrap();
+    let error = |t: &TileScreen| {
+        let map = t.feature_map(w, h);
+        let mut worst = 0.0f64;
+        for j in 0..h {
+            for i in 0..w {
+                let (s, tt) = (
+                    2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
+                    1.0 - 2.0 * (j as f64 + 0.5) / h as f64,
+                );
+                if let (Some((v, _)), Ok(d)) = (map.data[j * w + i], truth.direction(s, tt)) {
+                    worst = worst.max(v.angle_between(d).to_degrees());
+                }
+            }
+        }
+        worst
+    };
+    let (before, after) = (error(&coarse), error(&refined));
+    eprintln!(
+        "refine: {} → {} features, {before:.2}° → {after:.3}°",
+        coarse.feature_count(),
+        refined.feature_count()
+    );
+    assert!(
+        after < 0.25 && after < before / 10.0,
+        "{before}° → {after}°"
+    );
+    // An edit is carried along: the edited feature stays, and the refined screen departs from
+    // the projection around it as the edited coarse one did.
+    let nudged = coarse
+        .edit(&Edit::SetFeature {
+            column: 2,
+            row: 1,
+            phi: Some(5.0),
+            theta: None,
+            scale: None,
+            f: None,
+        })
+        .unwrap();
+    let kept = nudged
+        .edit(&Edit::Refine {
+            tolerance: Some(0.2),
+            max_features: Some(5000),
+        })
+        .unwrap();
+    let Layout::Grid { features, .. } = &kept.layout else {
+        unreachable!()
+    };
+    assert!(
+        features
+            .iter()
+            .any(|f| (f.phi - 5.0).abs() < 1e-9 && (f.x - 0.5).abs() < 1e-9),
+        "the edited feature is kept"
+    );
+    assert!(
+        error(&kept) > 4.0,
+        "the edit still shows: {}°",
+        error(&kept)
     );
 }

@@ -434,6 +434,23 @@ fn apply_edits(
                 };
                 sample_geometry(rig, ch, c, r).map_err(named)?
             }
+            // A channel's screen is refined towards its geometry, which the rig knows.
+            Edit::Refine {
+                tolerance,
+                max_features,
+            } if screen.source.is_none() => {
+                // The wall continued past its edge, as the screen's outside features are.
+                let (w, h) = (f64::from(ch.width), f64::from(ch.height));
+                let wider = rig.doc.screen.extended();
+                let exact = |x: f64, y: f64| {
+                    let ray = ch.lens.unproject([x * w - 0.5, y * h - 0.5]).ok()?;
+                    let p = wider.intersect(ch.position, ch.rotation * ray).point()?;
+                    rig.sampling_vector(p)
+                };
+                screen
+                    .refined(tolerance, max_features, &exact)
+                    .map_err(named)?
+            }
             other => screen.edit(&other).map_err(named)?,
         };
     }

@@ -7,12 +7,13 @@
 //! returns), one file, no server, and its own integrity check; the bundled build needs no system
 //! library. A log of JSON files would need our own compaction, index and recovery.
 //!
-//! Tables: `resources` (name → revision, document) is what the daemon serves; `history` has a
+//! Tables: `resources` (name → current revision) says what the daemon serves; `history` has a
 //! row per revision of each resource (who, when, what was asked, the RFC 6902 patch from the
 //! revision before, a full document every [`SNAPSHOT_EVERY`] revisions, and the undo/redo
 //! targets); `proposals` the calibration proposals. A revision's document is rebuilt from the
 //! nearest snapshot at or before it and the patches after, so 100,000 edits of one feature
-//! cost their patches, not 100,000 copies of the screen.
+//! cost their patches, not 100,000 copies of the screen — and an edit writes about a kilobyte,
+//! not the whole document (the current one is rebuilt the same way, once, at start-up).
 
 use rusqlite::{Connection, OptionalExtension, params};
 use serde_json::Value;
@@ -21,15 +22,14 @@ use std::sync::Mutex;
 
 /// A full document is kept every this many revisions of a resource (and whenever the patch
 /// would be larger than the document).
-pub const SNAPSHOT_EVERY: u64 = 64;
+pub const SNAPSHOT_EVERY: u64 = 256;
 
 /// The database file under the data directory.
 pub const FILE: &str = "omniwarp.db";
 
 const SCHEMA: &str = "
     CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-    CREATE TABLE IF NOT EXISTS resources (
-        name TEXT PRIMARY KEY, revision INTEGER NOT NULL, document TEXT NOT NULL);
+    CREATE TABLE IF NOT EXISTS resources (name TEXT PRIMARY KEY, revision INTEGER NOT NULL);
     CREATE TABLE IF NOT EXISTS history (
         seq INTEGER PRIMARY KEY AUTOINCREMENT,
         resource TEXT NOT NULL, revision INTEGER NOT NULL,
@@ -135,17 +135,13 @@ impl Db {
 
     /// The current revision and document of `resource`.
     pub fn current(&self, resource: &str) -> crate::Result<Option<(u64, Value)>> {
-        let row: Option<(i64, String)> = self
-            .conn()
-            .query_row(
-                "SELECT revision, document FROM resources WHERE name = ?1",
-                [resource],
-                |r| Ok((r.get(0)?, r.get(1)?)),
-            )
-            .optional()
-            .map_err(fail)?;
-        row.map(|(rev, doc)| Ok((rev as u64, serde_json::from_str(&doc).map_err(fail)?)))
-            .transpose()
+        let conn = self.conn();
+        let Some(revision) = revision_in(&conn, resource)? else {
+            return Ok(None);
+        };
+        let doc = at_in(&conn, resource, revision)?
+            .ok_or_else(|| fail(format!("{resource} lost revision {revision}")))?;
+        Ok(Some((revision, doc)))
     }
 
     /// Makes `after` the current document of `resource` and appends it to the history, in one
@@ -160,32 +156,26 @@ impl Db {
     ) -> crate::Result<()> {
         let mut conn = self.conn();
         let tx = conn.transaction().map_err(fail)?;
-        let stored: Option<(i64, String)> = tx
-            .query_row(
-                "SELECT revision, document FROM resources WHERE name = ?1",
-                [resource],
-                |r| Ok((r.get(0)?, r.get(1)?)),
-            )
-            .optional()
-            .map_err(fail)?;
-        let previous: Option<(u64, Value)> = match (stored, before) {
-            (Some((rev, doc)), _) => Some((rev as u64, serde_json::from_str(&doc).map_err(fail)?)),
+        let stored = revision_in(&tx, resource)?;
+        // The caller's `before` is the current document whenever its revision is the stored
+        // one; only otherwise is it rebuilt (a write after a recovery, say).
+        let previous: Option<(u64, std::borrow::Cow<Value>)> = match (stored, before) {
+            (Some(rev), Some((b, doc))) if rev == b => Some((rev, std::borrow::Cow::Borrowed(doc))),
+            (Some(rev), _) => {
+                let doc = at_in(&tx, resource, rev)?
+                    .ok_or_else(|| fail(format!("{resource} lost revision {rev}")))?;
+                Some((rev, std::borrow::Cow::Owned(doc)))
+            }
             (None, Some((rev, doc))) => {
-                insert_row(
-                    &tx,
-                    resource,
-                    rev,
-                    None,
-                    doc,
-                    &Meta {
-                        who: "omniwarp".into(),
-                        action: "create",
-                        request: None,
-                        undo_to: None,
-                        redo_to: None,
-                    },
-                )?;
-                Some((rev, doc.clone()))
+                let created = Meta {
+                    who: "omniwarp".into(),
+                    action: "create",
+                    request: None,
+                    undo_to: None,
+                    redo_to: None,
+                };
+                insert_row(&tx, resource, rev, None, doc, &created)?;
+                Some((rev, std::borrow::Cow::Borrowed(doc)))
             }
             (None, None) => None,
         };
@@ -193,13 +183,13 @@ impl Db {
             &tx,
             resource,
             after.0,
-            previous.as_ref().map(|(r, d)| (*r, d)),
+            previous.as_ref().map(|(r, d)| (*r, d.as_ref())),
             after.1,
             meta,
         )?;
         tx.execute(
-            "INSERT OR REPLACE INTO resources (name, revision, document) VALUES (?1, ?2, ?3)",
-            params![resource, after.0 as i64, after.1.to_string()],
+            "INSERT OR REPLACE INTO resources (name, revision) VALUES (?1, ?2)",
+            params![resource, after.0 as i64],
         )
         .map_err(fail)?;
         tx.commit().map_err(fail)
@@ -207,47 +197,7 @@ impl Db {
 
     /// The document of `resource` at `revision`, rebuilt from its history.
     pub fn at(&self, resource: &str, revision: u64) -> crate::Result<Option<Value>> {
-        let conn = self.conn();
-        let base: Option<(i64, String)> = conn
-            .query_row(
-                "SELECT revision, snapshot FROM history WHERE resource = ?1 AND revision <= ?2
-                 AND snapshot IS NOT NULL ORDER BY revision DESC LIMIT 1",
-                params![resource, revision as i64],
-                |r| Ok((r.get(0)?, r.get(1)?)),
-            )
-            .optional()
-            .map_err(fail)?;
-        let exists: bool = conn
-            .query_row(
-                "SELECT COUNT(*) FROM history WHERE resource = ?1 AND revision = ?2",
-                params![resource, revision as i64],
-                |r| r.get::<_, i64>(0),
-            )
-            .map_err(fail)?
-            > 0;
-        let Some((from, snapshot)) = base.filter(|_| exists) else {
-            return Ok(None);
-        };
-        let mut doc: Value = serde_json::from_str(&snapshot).map_err(fail)?;
-        let mut st = conn
-            .prepare(
-                "SELECT patch FROM history WHERE resource = ?1 AND revision > ?2
-                 AND revision <= ?3 ORDER BY revision",
-            )
-            .map_err(fail)?;
-        let patches = st
-            .query_map(params![resource, from, revision as i64], |r| {
-                r.get::<_, Option<String>>(0)
-            })
-            .map_err(fail)?;
-        for p in patches {
-            let p = p
-                .map_err(fail)?
-                .ok_or_else(|| fail("a history row lost its patch"))?;
-            let patch: json_patch::Patch = serde_json::from_str(&p).map_err(fail)?;
-            json_patch::patch(&mut doc, &patch).map_err(fail)?;
-        }
-        Ok(Some(doc))
+        at_in(&self.conn(), resource, revision)
     }
 
     /// The patch that made `revision` of `resource` from the one before (`None` for the first
@@ -358,6 +308,63 @@ impl Db {
     }
 }
 
+/// The document of `resource` at `revision`: the nearest snapshot at or before it, and the
+/// patches after it.
+fn at_in(conn: &Connection, resource: &str, revision: u64) -> crate::Result<Option<Value>> {
+    let base: Option<(i64, String)> = conn
+        .query_row(
+            "SELECT revision, snapshot FROM history WHERE resource = ?1 AND revision <= ?2
+             AND snapshot IS NOT NULL ORDER BY revision DESC LIMIT 1",
+            params![resource, revision as i64],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .optional()
+        .map_err(fail)?;
+    let exists: bool = conn
+        .query_row(
+            "SELECT COUNT(*) FROM history WHERE resource = ?1 AND revision = ?2",
+            params![resource, revision as i64],
+            |r| r.get::<_, i64>(0),
+        )
+        .map_err(fail)?
+        > 0;
+    let Some((from, snapshot)) = base.filter(|_| exists) else {
+        return Ok(None);
+    };
+    let mut doc: Value = serde_json::from_str(&snapshot).map_err(fail)?;
+    let mut st = conn
+        .prepare(
+            "SELECT patch FROM history WHERE resource = ?1 AND revision > ?2
+             AND revision <= ?3 ORDER BY revision",
+        )
+        .map_err(fail)?;
+    let patches = st
+        .query_map(params![resource, from, revision as i64], |r| {
+            r.get::<_, Option<String>>(0)
+        })
+        .map_err(fail)?;
+    for p in patches {
+        let p = p
+            .map_err(fail)?
+            .ok_or_else(|| fail("a history row lost its patch"))?;
+        let patch: json_patch::Patch = serde_json::from_str(&p).map_err(fail)?;
+        json_patch::patch(&mut doc, &patch).map_err(fail)?;
+    }
+    Ok(Some(doc))
+}
+
+/// The current revision of `resource`, if it has one.
+fn revision_in(conn: &Connection, resource: &str) -> crate::Result<Option<u64>> {
+    conn.query_row(
+        "SELECT revision FROM resources WHERE name = ?1",
+        [resource],
+        |r| r.get::<_, i64>(0),
+    )
+    .optional()
+    .map(|r| r.map(|v| v as u64))
+    .map_err(fail)
+}
+
 const SELECT_ROW: &str =
     "SELECT seq, resource, revision, at_ms, who, action, request, undo_to, redo_to FROM history";
 
@@ -386,18 +393,18 @@ fn insert_row(
     doc: &Value,
     meta: &Meta,
 ) -> crate::Result<()> {
-    let text = doc.to_string();
     let patch = previous
         .map(|(_, p)| serde_json::to_string(&json_patch::diff(p, doc)).expect("patches serialise"));
+    // Only a large patch (a reset or a PUT replaces most of the document) is worth comparing
+    // with the document: replaying it would cost more than a snapshot says.
+    let small = |p: &str| p.len() < 4096 || p.len() < doc.to_string().len();
     let snapshot = match (&patch, previous) {
         (Some(p), Some((prev, _)))
-            if !revision.is_multiple_of(SNAPSHOT_EVERY)
-                && p.len() < text.len()
-                && prev + 1 == revision =>
+            if !revision.is_multiple_of(SNAPSHOT_EVERY) && prev + 1 == revision && small(p) =>
         {
             None
         }
-        _ => Some(text),
+        _ => Some(doc.to_string()),
     };
     tx.execute(
         "INSERT INTO history (resource, revision, at_ms, who, action, request, patch, snapshot,

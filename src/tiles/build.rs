@@ -44,6 +44,7 @@ fn feature(x: f64, y: f64, d: Option<DVec3>, f: f64) -> Feature {
         f,
         valid,
         outside: false,
+        weight: 1.0,
     }
 }
 
@@ -193,6 +194,7 @@ pub fn extend_past_edge(t: &mut TileScreen, beyond: impl Fn(f64, f64) -> Option<
                 scale: 1.0,
                 valid: true,
                 outside: true,
+                weight: 1.0,
                 ..*me
             };
         }

@@ -51,7 +51,35 @@ pub enum Edit {
     },
     /// Back to the projection the screen was sampled from, at the current grid size.
     Reset,
+    /// Splits every tile of the columns and rows given (the whole grid where absent) in two
+    /// each way; the new features are the warp as it is shown there, so nothing moves (within
+    /// 0.01°, see [`super::refine`]).
+    Subdivide {
+        #[serde(default)]
+        columns: Option<(usize, usize)>,
+        #[serde(default)]
+        rows: Option<(usize, usize)>,
+    },
+    /// Removes the inner rows and columns whose removal moves no pixel by more than `tolerance`
+    /// degrees (default 0.01).
+    Coarsen {
+        #[serde(default)]
+        tolerance: Option<f64>,
+    },
+    /// Inserts rows and columns where the screen departs most from what it was sampled from
+    /// (the projection, or a channel's geometry) until it is within `tolerance` degrees
+    /// (default 0.01) or has `max_features` (default four times as many as now); new features
+    /// carry the edits around them along.
+    Refine {
+        #[serde(default)]
+        tolerance: Option<f64>,
+        #[serde(default)]
+        max_features: Option<usize>,
+    },
 }
+
+/// The tolerance of `coarsen` and `refine` when none is given, degrees.
+pub const REFINE_TOLERANCE: f64 = 0.01;
 
 fn grid_parts(t: &TileScreen) -> Result<(usize, usize, &Vec<Feature>)> {
     match &t.layout {
@@ -87,6 +115,7 @@ fn midpoint(a: &Feature, b: &Feature) -> Feature {
         valid: a.valid && b.valid,
         // Possibly on the wall, but nothing here says so: held, like the edge it sits at.
         outside: a.outside || b.outside,
+        weight: 1.0,
     }
 }
 
@@ -263,6 +292,29 @@ impl TileScreen {
                     }
                 }
             }
+            Edit::Subdivide { columns, rows } => {
+                next.layout = super::refine::subdivide(self, *columns, *rows)?.layout;
+            }
+            Edit::Coarsen { tolerance } => {
+                let tol = tolerance.unwrap_or(REFINE_TOLERANCE);
+                next.layout = super::refine::coarsen(self, tol)?.layout;
+            }
+            Edit::Refine {
+                tolerance,
+                max_features,
+            } => {
+                let view = self
+                    .source
+                    .as_ref()
+                    .ok_or_else(|| {
+                        Error::invalid("tiles", "has no source projection to refine towards")
+                    })?
+                    .view()?;
+                // Past a fisheye's circle its formula goes on, as the screen's features do.
+                let exact =
+                    |x: f64, y: f64| view.direction_unbounded(2.0 * x - 1.0, 1.0 - 2.0 * y).ok();
+                next.layout = self.refined(*tolerance, *max_features, &exact)?.layout;
+            }
             Edit::Reset => {
                 let (c, r, _) = grid_parts(self)?;
                 let source = self.source.as_ref().ok_or_else(|| {
@@ -282,6 +334,20 @@ impl TileScreen {
             refuse_content_folds(self, &next, edit)?;
         }
         Ok(next)
+    }
+}
+
+impl TileScreen {
+    /// [`Edit::Refine`] towards `exact` (what the screen was sampled from).
+    pub fn refined(
+        &self,
+        tolerance: Option<f64>,
+        max_features: Option<usize>,
+        exact: &(dyn Fn(f64, f64) -> Option<DVec3> + Sync),
+    ) -> Result<TileScreen> {
+        let limit = max_features.unwrap_or(4 * self.feature_count());
+        let tol = tolerance.unwrap_or(REFINE_TOLERANCE);
+        Ok(super::refine::refine(self, tol, limit, exact)?.0)
     }
 }
 

@@ -15,6 +15,7 @@ pub mod adapt;
 pub mod build;
 pub mod edit;
 pub mod raster;
+pub mod refine;
 
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -48,6 +49,13 @@ pub struct Feature {
     /// these features and their neighbours: together they are the edge.
     #[serde(default, skip_serializing_if = "is_false")]
     pub outside: bool,
+    /// How much the feature's direction counts when directions are interpolated
+    /// ([`Interpolation::Vectors`]): the rasteriser interpolates weight × direction and
+    /// normalises, as a GPU interpolates homogeneous coordinates. 1 for sampled features; a
+    /// feature made by subdividing a tile keeps the length of the interpolated vector, so the
+    /// finer grid shows exactly what the coarser one did.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub weight: f64,
 }
 
 fn one() -> f64 {
@@ -61,6 +69,9 @@ fn is_true(b: &bool) -> bool {
 }
 fn is_false(b: &bool) -> bool {
     !*b
+}
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 /// How the features are connected.
@@ -319,6 +330,7 @@ fn check_feature(name: &str, f: &Feature) -> Result<()> {
         ("theta", f.theta),
         ("scale", f.scale),
         ("f", f.f),
+        ("weight", f.weight),
     ];
     for (field, v) in fields {
         if !v.is_finite() {
@@ -343,6 +355,12 @@ fn check_feature(name: &str, f: &Feature) -> Result<()> {
                 format!("must lie in [−360, 360] degrees, got {v}"),
             ));
         }
+    }
+    if !(f.weight > 0.0 && f.weight <= 1.0) {
+        return Err(Error::invalid(
+            format!("{name}.weight"),
+            format!("must lie in (0, 1], got {}", f.weight),
+        ));
     }
     if f.scale <= 0.0 {
         return Err(Error::invalid(

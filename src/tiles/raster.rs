@@ -130,7 +130,7 @@ impl TileScreen {
                 };
                 Prepared {
                     corners: t,
-                    normals: t.map(|f| f_normal(f.phi, f.theta, f.scale)),
+                    normals: t.map(|f| f.weight * f_normal(f.phi, f.theta, f.scale)),
                     area2: 2.0 * super::signed_area(&t[0], &t[1], &t[2]),
                     x0: lo(xs),
                     x1: hi(xs, width),

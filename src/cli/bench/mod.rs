@@ -8,6 +8,7 @@ pub mod gpu;
 pub mod lens;
 pub mod rig;
 pub mod serve;
+pub mod store;
 pub mod tiles;
 pub mod warp;
 
@@ -33,6 +34,9 @@ pub enum BenchCommand {
     /// The daemon over loopback: tile edits per second and latency with many clients, and 1080p
     /// preview latency while they edit.
     Serve(serve::ServeBenchArgs),
+    /// What keeping a tile edit costs: the SQLite store with its history against the file
+    /// store of 0.1.0, 8 and 32 writers; revert cost; history size after 100k edits.
+    Store(store::StoreBenchArgs),
     /// Calibration against point count (50, 500, 5000) and lens model.
     Calibrate,
     /// Lens models: project and unproject throughput, one thread and all cores.
@@ -49,6 +53,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Rig { rig } => rig::run(&rig),
         BenchCommand::Gpu(a) => gpu::run(a),
         BenchCommand::Serve(a) => serve::run(a),
+        BenchCommand::Store(a) => store::run(a),
         BenchCommand::Calibrate => calibrate::run(),
         BenchCommand::Lens => lens::run(),
         BenchCommand::Tiles => tiles::run(),
