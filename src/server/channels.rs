@@ -7,9 +7,9 @@ use super::jobs::run_write;
 use super::state::{AppState, AtRevision, Query, document_at, if_match, meta, parse_body, tagged};
 use super::store::{Canvas, ChannelData, Versioned, content_resource, tiles_resource};
 use crate::rig::{Channel, Rig};
-use crate::tiles::TileScreen;
 use crate::tiles::build::{extend_past_edge, grid_of};
 use crate::tiles::edit::Edit;
+use crate::tiles::{Layout, TileScreen};
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;
@@ -94,6 +94,13 @@ impl Part {
         }
     }
 
+    pub fn of_revision(self, data: &ChannelData) -> u64 {
+        match self {
+            Part::Content => data.content.revision,
+            Part::Tiles => data.tiles.revision,
+        }
+    }
+
     /// The revision and document of this part of `data`.
     pub fn of(self, data: &ChannelData) -> (u64, serde_json::Value) {
         match self {
@@ -119,12 +126,29 @@ pub async fn commit(
     part: Part,
     mut meta: Meta,
 ) -> Result<u64, ApiError> {
-    let (before, after) = (part.of(held), part.of(&next));
+    let (old, new) = (held.clone(), next.clone());
+    let revision = part.of_revision(&next);
     if matches!(meta.action, "put" | "patch" | "delete") {
-        meta.undo_to = Some(before.0);
+        meta.undo_to = Some(part.of_revision(held));
     }
-    let (state, resource, revision) = (s.clone(), part.resource(id), after.0);
+    let (state, resource) = (s.clone(), part.resource(id));
+    // Turning two screens into JSON values and comparing them costs milliseconds: off the
+    // runtime, with the write, and skipped where a tile edit changed only some features.
     tokio::task::spawn_blocking(move || {
+        let revisions = (part.of_revision(&old), part.of_revision(&new));
+        if part == Part::Tiles
+            && let Some(patch) = feature_patch(&old.tiles.value, &new.tiles.value)
+        {
+            let doc = || part.of(&new).1;
+            if state
+                .store
+                .db
+                .write_patch(&resource, revisions, &patch, &doc, &meta)?
+            {
+                return Ok(());
+            }
+        }
+        let (before, after) = (part.of(&old), part.of(&new));
         state
             .store
             .save_doc(&resource, (before.0, &before.1), (after.0, &after.1), &meta)
@@ -134,6 +158,50 @@ pub async fn commit(
     *held = next;
     s.announce(serde_json::json!({"kind": part.kind(), "channel": id, "revision": revision}));
     Ok(revision)
+}
+
+/// The RFC 6902 patch from one tile screen to the next when they differ only in some grid
+/// features (and the revision): each changed feature replaced whole. `None` for anything else,
+/// which the store compares as documents.
+fn feature_patch(old: &Option<TileScreen>, new: &Option<TileScreen>) -> Option<json_patch::Patch> {
+    let (Some(a), Some(b)) = (old, new) else {
+        return None;
+    };
+    let (
+        Layout::Grid {
+            columns: c0,
+            rows: r0,
+            features: f0,
+        },
+        Layout::Grid {
+            columns: c1,
+            rows: r1,
+            features: f1,
+        },
+    ) = (&a.layout, &b.layout)
+    else {
+        return None;
+    };
+    if (c0, r0, a.format, &a.source, a.interpolation)
+        != (c1, r1, b.format, &b.source, b.interpolation)
+    {
+        return None;
+    }
+    let mut ops =
+        vec![serde_json::json!({"op": "replace", "path": "/revision", "value": b.revision})];
+    for (i, (x, y)) in f0.iter().zip(f1).enumerate() {
+        if x != y {
+            ops.push(serde_json::json!({"op": "replace", "path": format!("/layout/features/{i}"), "value": y}));
+        }
+    }
+    if a.revision == b.revision {
+        ops.remove(0);
+    }
+    // Past a quarter of the screen a document comparison is as cheap and a snapshot may be due.
+    if ops.len() > f1.len() / 4 {
+        return None;
+    }
+    serde_json::from_value(serde_json::Value::Array(ops)).ok()
 }
 
 pub async fn get_content(

@@ -195,6 +195,35 @@ impl Db {
         tx.commit().map_err(fail)
     }
 
+    /// [`Db::write`] when the patch from revision `from` is already known (a tile edit that
+    /// changed a few features): nothing is rebuilt or compared, and `doc` is asked for only when
+    /// a snapshot is due. `Ok(false)` (nothing written) when `from` is not the stored revision.
+    pub fn write_patch(
+        &self,
+        resource: &str,
+        (from, to): (u64, u64),
+        patch: &json_patch::Patch,
+        doc: &dyn Fn() -> Value,
+        meta: &Meta,
+    ) -> crate::Result<bool> {
+        let mut conn = self.conn();
+        let tx = conn.transaction().map_err(fail)?;
+        if revision_in(&tx, resource)? != Some(from) {
+            return Ok(false);
+        }
+        let text = serde_json::to_string(patch).expect("patches serialise");
+        let snapshot =
+            (to.is_multiple_of(SNAPSHOT_EVERY) || from + 1 != to).then(|| doc().to_string());
+        insert(&tx, resource, to, Some(text), snapshot, meta)?;
+        tx.execute(
+            "INSERT OR REPLACE INTO resources (name, revision) VALUES (?1, ?2)",
+            params![resource, to as i64],
+        )
+        .map_err(fail)?;
+        tx.commit().map_err(fail)?;
+        Ok(true)
+    }
+
     /// The document of `resource` at `revision`, rebuilt from its history.
     pub fn at(&self, resource: &str, revision: u64) -> crate::Result<Option<Value>> {
         at_in(&self.conn(), resource, revision)
@@ -406,6 +435,18 @@ fn insert_row(
         }
         _ => Some(doc.to_string()),
     };
+    insert(tx, resource, revision, patch, snapshot, meta)
+}
+
+/// Appends one history row.
+fn insert(
+    tx: &rusqlite::Transaction,
+    resource: &str,
+    revision: u64,
+    patch: Option<String>,
+    snapshot: Option<String>,
+    meta: &Meta,
+) -> crate::Result<()> {
     tx.execute(
         "INSERT INTO history (resource, revision, at_ms, who, action, request, patch, snapshot,
          undo_to, redo_to) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",

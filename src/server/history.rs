@@ -15,7 +15,7 @@
 
 use super::ApiError;
 use super::channels::{Part, commit};
-use super::db::{Meta, Row};
+use super::db::{Db, Meta, Row};
 use super::rig::commit_rig;
 use super::state::{AppState, Query, document_at, if_match, meta, parse_body, tagged};
 use super::store::ChannelData;
@@ -77,17 +77,28 @@ enum Step {
     Redo,
 }
 
-/// The revision `step` makes current again, and the history entry of the new revision.
+/// The revision `step` makes current again, and the history entry of the new revision (the
+/// history is read in the blocking pool: a query can wait on a commit's fsync).
 async fn plan(
     s: &Arc<AppState>,
     resource: &str,
     current: u64,
     step: Step,
 ) -> Result<(u64, Meta), ApiError> {
-    let state = s.clone();
-    let res = resource.to_string();
-    let row =
-        move |rev: u64| -> Result<Option<Row>, ApiError> { Ok(state.store.db.row(&res, rev)?) };
+    let (state, res, base) = (s.clone(), resource.to_string(), meta(s, "revert", None));
+    tokio::task::spawn_blocking(move || plan_in(&state.store.db, &res, current, step, base))
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))?
+}
+
+fn plan_in(
+    db: &Db,
+    resource: &str,
+    current: u64,
+    step: Step,
+    base: Meta,
+) -> Result<(u64, Meta), ApiError> {
+    let row = |rev: u64| -> Result<Option<Row>, ApiError> { Ok(db.row(resource, rev)?) };
     let nothing = |what: &str| {
         ApiError::refused(
             StatusCode::CONFLICT,
@@ -95,7 +106,11 @@ async fn plan(
             format!("nothing to {what}: revision {current} of {resource} has no {what} step"),
         )
     };
-    let m = |action: &'static str, request: Option<serde_json::Value>| meta(s, action, request);
+    let m = |action: &'static str, to: u64| Meta {
+        action,
+        request: Some(serde_json::json!({ "revision": to })),
+        ..base.clone()
+    };
     match step {
         Step::Revert(to) => {
             if to == current || row(to)?.is_none() {
@@ -108,7 +123,7 @@ async fn plan(
                     },
                 });
             }
-            let mut meta = m("revert", Some(serde_json::json!({ "revision": to })));
+            let mut meta = m("revert", to);
             meta.undo_to = Some(current);
             Ok((to, meta))
         }
@@ -116,7 +131,7 @@ async fn plan(
             let to = row(current)?
                 .and_then(|r| r.undo_to)
                 .ok_or_else(|| nothing("undo"))?;
-            let mut meta = m("undo", Some(serde_json::json!({ "revision": to })));
+            let mut meta = m("undo", to);
             meta.undo_to = row(to)?.and_then(|r| r.undo_to);
             meta.redo_to = Some(current);
             Ok((to, meta))
@@ -126,7 +141,7 @@ async fn plan(
                 .and_then(|r| r.redo_to)
                 .ok_or_else(|| nothing("redo"))?;
             let target = row(to)?;
-            let mut meta = m("redo", Some(serde_json::json!({ "revision": to })));
+            let mut meta = m("redo", to);
             meta.undo_to = target.as_ref().and_then(|r| r.undo_to);
             meta.redo_to = target.and_then(|r| r.redo_to);
             Ok((to, meta))
