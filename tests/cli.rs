@@ -1094,6 +1094,21 @@ fn export_writes_meshes_2d_grids_and_mpcdi_packages() {
     assert!(ok, "{err}");
     let pkg = omniwarp::export::mpcdi::read(&std::fs::read(s.path("rig.mpcdi")).unwrap()).unwrap();
     assert_eq!(pkg.buffers[0].regions.len(), 2);
+    assert_eq!(pkg.attr("version"), Some("2.0"));
+    assert!(
+        pkg.xml.contains("<bitDepth>8</bitDepth>"),
+        "8-bit alpha by default"
+    );
+    // WATCHOUT 6 reads 1.0; 16-bit alpha on request.
+    let (ok, err) = run(
+        "mpcdi",
+        "old.mpcdi",
+        &["--mpcdi-version", "1.0", "--alpha-bits", "16"],
+    );
+    assert!(ok, "{err}");
+    let old = omniwarp::export::mpcdi::read(&std::fs::read(s.path("old.mpcdi")).unwrap()).unwrap();
+    assert_eq!(old.attr("version"), Some("1.0"));
+    assert!(old.xml.contains("<bitDepth>16</bitDepth>"));
     let (ok, err) = run("mesh", "x.data", &[]);
     assert!(!ok && err.contains("--channel"), "{err}");
     let (ok, err) = run("mesh", "y.data", &["--channel", "left", "--tolerance", "0"]);

@@ -439,7 +439,7 @@ fn mpcdi_seed() -> Vec<u8> {
         w,
         h,
         &vec![1.0f32; (w * h) as usize],
-        omniwarp::rig::BlendOptions { gamma: 2.2 },
+        omniwarp::rig::BlendOptions::default(),
     )
     .unwrap();
     let samples: Vec<[f32; 3]> = (0..6).map(|i| [i as f32 / 6.0, 0.5, f32::NAN]).collect();
@@ -448,6 +448,7 @@ fn mpcdi_seed() -> Vec<u8> {
         resolution: [w, h],
         warp: (3, 2, samples),
         alpha_png: alpha,
+        alpha_bits: 16,
     };
     package(Version::V2, Profile::TwoD, &[region], 0).unwrap()
 }

@@ -381,8 +381,16 @@ fn the_blend_pngs_a_media_server_gets_sum_to_one() {
             .zip(&warps)
             .map(|(ch, w)| {
                 let weights = rig.blend_weights(ch, &w.points);
-                let png =
-                    blend_png_bytes(ch.width, ch.height, &weights, BlendOptions { gamma }).unwrap();
+                let png = blend_png_bytes(
+                    ch.width,
+                    ch.height,
+                    &weights,
+                    BlendOptions {
+                        gamma,
+                        ..BlendOptions::default()
+                    },
+                )
+                .unwrap();
                 let mut reader = png::Decoder::new(std::io::Cursor::new(png))
                     .read_info()
                     .unwrap();

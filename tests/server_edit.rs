@@ -1195,3 +1195,72 @@ async fn every_edit_op_keeps_the_wall_edge_of_a_straddling_screen() {
         assert!(moved <= keeps, "{op}: the warp moved by {moved}°");
     }
 }
+
+/// The first `n` bytes of a PNG's decoded rows, whatever its bit depth: how the VESA reference
+/// library's PNG reader (and PyMPCDI's) takes an alpha map (issue 20: "ignores bit depth").
+fn eight_bit_reader(png_bytes: &[u8]) -> (u32, u32, Vec<u8>) {
+    let mut dec = png::Decoder::new(std::io::Cursor::new(png_bytes));
+    dec.set_transformations(png::Transformations::IDENTITY);
+    let mut r = dec.read_info().unwrap();
+    let mut buf = vec![0; r.output_buffer_size().unwrap()];
+    let info = r.next_frame(&mut buf).unwrap();
+    let n = (info.width * info.height) as usize;
+    (info.width, info.height, buf[..n].to_vec())
+}
+
+/// MPCDI alpha maps are 8-bit by default (issue 20, item 2), so a reader that decodes 8 bits
+/// only shows the blend omniwarp wrote (within one level); the 16-bit maps asked for with
+/// `alpha_bits=16` are what such a reader garbles.
+#[tokio::test]
+async fn mpcdi_alpha_maps_are_8_bit_unless_asked_and_decode_in_an_8_bit_reader() {
+    let s = state(None, None);
+    let alpha_of = |zip: &[u8], id: &str| {
+        let mut z = zip::ZipArchive::new(std::io::Cursor::new(zip.to_vec())).unwrap();
+        let mut f = z.by_name(&format!("AlphaMap-{id}.png")).unwrap();
+        let mut out = Vec::new();
+        std::io::Read::read_to_end(&mut f, &mut out).unwrap();
+        out
+    };
+    let (st, _, eight) = call(&s, get("/v1/export.mpcdi")).await;
+    assert_eq!(st, StatusCode::OK);
+    let (st, _, sixteen) = call(&s, get("/v1/export.mpcdi?alpha_bits=16")).await;
+    assert_eq!(st, StatusCode::OK);
+    let (st, _, body) = call(&s, get("/v1/export.mpcdi?alpha_bits=12")).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("alpha_bits"))
+    );
+    let truth = mpcdi::read(&sixteen).unwrap();
+    assert!(truth.xml.contains("<bitDepth>16</bitDepth>"));
+    assert!(
+        mpcdi::read(&eight)
+            .unwrap()
+            .xml
+            .contains("<bitDepth>8</bitDepth>")
+    );
+    for region in &truth.buffers[0].regions {
+        let (w, h, exact) = &region.alpha;
+        let worst = |png: &[u8]| {
+            let (rw, rh, bytes) = eight_bit_reader(png);
+            assert_eq!((rw, rh), (*w, *h));
+            bytes
+                .iter()
+                .zip(exact)
+                .map(|(b, a)| (f64::from(*b) / 255.0 - a).abs())
+                .fold(0.0, f64::max)
+        };
+        let (good, garbled) = (
+            worst(&alpha_of(&eight, &region.id)),
+            worst(&alpha_of(&sixteen, &region.id)),
+        );
+        eprintln!(
+            "{}: 8-bit map {good:.4}, 16-bit map {garbled:.4} in an 8-bit reader",
+            region.id
+        );
+        assert!(good <= 0.5 / 255.0 + 1e-6, "{}: {good}", region.id);
+        assert!(
+            garbled > 0.1,
+            "the 16-bit map is what such a reader garbles"
+        );
+    }
+}

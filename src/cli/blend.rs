@@ -24,7 +24,10 @@ pub fn run(a: BlendArgs) -> Result<()> {
     let rig = read_rig(&a.rig)?;
     std::fs::create_dir_all(&a.out_dir)
         .with_context(|| format!("--out-dir {}", a.out_dir.display()))?;
-    let opts = BlendOptions { gamma: a.gamma };
+    let opts = BlendOptions {
+        gamma: a.gamma,
+        ..BlendOptions::default()
+    };
     for ch in &rig.channels {
         let t = Instant::now();
         let w = rig.warp(ch);

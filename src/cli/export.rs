@@ -50,6 +50,12 @@ pub struct ExportArgs {
     /// The ymap file for --format remap.
     #[arg(long)]
     ymap: Option<PathBuf>,
+    /// MPCDI version written: 1.0 (WATCHOUT 6 and other older readers) or 2.0.
+    #[arg(long, default_value = "2.0", value_parser = ["1.0", "2.0"])]
+    mpcdi_version: String,
+    /// Bits of the MPCDI alpha maps: 8 (what readers decode) or 16.
+    #[arg(long, default_value = "8", value_parser = ["8", "16"])]
+    alpha_bits: String,
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
@@ -102,7 +108,8 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 weights: &weights,
                 cancel: &never,
             };
-            let (region, err) = src.region(profile, tol)?;
+            let bits = if a.alpha_bits == "16" { 16 } else { 8 };
+            let (region, err) = src.region(profile, tol, bits)?;
             eprintln!(
                 "{}: {}×{} grid, worst error {err:.4}",
                 ch.id, region.warp.0, region.warp.1
@@ -112,7 +119,12 @@ pub fn run(a: ExportArgs) -> Result<()> {
         let now = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs());
-        write(&mpcdi::package(mpcdi::Version::V2, profile, &regions, now)?)?;
+        let version = if a.mpcdi_version == "1.0" {
+            mpcdi::Version::V1
+        } else {
+            mpcdi::Version::V2
+        };
+        write(&mpcdi::package(version, profile, &regions, now)?)?;
         return Ok(());
     }
     let id = a

@@ -134,7 +134,7 @@ impl Sources<'_> {
 
     /// Alpha (blend weights), zero wherever the profile's field has no value, so players that
     /// extrapolate NaN still show black there.
-    fn alpha_png(&self, profile: Profile) -> Result<Vec<u8>> {
+    fn alpha_png(&self, profile: Profile, bits: u8) -> Result<Vec<u8>> {
         let w: Vec<f32> = (0..self.weights.len())
             .map(|n| {
                 let known = match profile {
@@ -150,12 +150,19 @@ impl Sources<'_> {
             &w,
             BlendOptions {
                 gamma: mpcdi::ALPHA_GAMMA,
+                bits,
             },
         )
     }
 
-    /// The channel's MPCDI region and the worst interpolation error of its grid.
-    pub fn region(&self, profile: Profile, tol: Tolerance) -> Result<(Region, f64)> {
+    /// The channel's MPCDI region (alpha map of `alpha_bits`, 8 or 16) and the worst
+    /// interpolation error of its grid.
+    pub fn region(
+        &self,
+        profile: Profile,
+        tol: Tolerance,
+        alpha_bits: u8,
+    ) -> Result<(Region, f64)> {
         let (columns, rows, samples, err) = match profile {
             Profile::TwoD => {
                 let (c, s) = self.grid_2d(tol)?;
@@ -171,7 +178,8 @@ impl Sources<'_> {
                 id: self.id.to_string(),
                 resolution: [self.width as u32, self.height as u32],
                 warp: (columns, rows, samples),
-                alpha_png: self.alpha_png(profile)?,
+                alpha_png: self.alpha_png(profile, alpha_bits)?,
+                alpha_bits,
             },
             err,
         ))

@@ -39,9 +39,15 @@ pub struct Region {
     pub resolution: [u32; 2],
     /// Warp grid size and samples, rows top to bottom (NaN where unknown).
     pub warp: (usize, usize, Vec<[f32; 3]>),
-    /// 16-bit grey alpha map at the projector resolution, gamma 2.2 embedded.
+    /// Grey alpha map at the projector resolution, gamma 2.2 embedded.
     pub alpha_png: Vec<u8>,
+    /// Its bits a sample: 8 by default (the VESA reference library and PyMPCDI decode 8 bits
+    /// only and garble 16), 16 on request.
+    pub alpha_bits: u8,
 }
+
+/// The alpha maps' bits a sample when none is asked for.
+pub const ALPHA_BITS: u8 = 8;
 
 /// Gamma baked into the alpha maps we write.
 pub const ALPHA_GAMMA: f64 = 2.2;
@@ -109,9 +115,9 @@ pub fn xml(version: Version, profile: Profile, regions: &[Region], unix_time: u6
     }
     x += "    </buffer>\n  </display>\n  <files>\n";
     for r in regions {
-        let id = escape(&r.id);
+        let (id, bits) = (escape(&r.id), r.alpha_bits);
         x += &format!(
-            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>m</geometricUnit>\n        <originof3DData>idealEyePoint</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>16</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n    </fileset>\n"
+            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>m</geometricUnit>\n        <originof3DData>idealEyePoint</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>{bits}</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n    </fileset>\n"
         );
     }
     x += "  </files>\n</MPCDI>\n";

@@ -19,11 +19,16 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BlendOptions {
     pub gamma: f64,
+    /// 8 or 16 bits a sample (MPCDI readers commonly decode 8 only).
+    pub bits: u8,
 }
 
 impl Default for BlendOptions {
     fn default() -> Self {
-        BlendOptions { gamma: 2.2 }
+        BlendOptions {
+            gamma: 2.2,
+            bits: 16,
+        }
     }
 }
 
@@ -107,7 +112,7 @@ impl Rig {
     }
 }
 
-/// Writes blend weights as a 16-bit grey PNG in signal space (m = w^(1/γ)).
+/// Writes blend weights as a grey PNG (16 or 8 bits) in signal space (m = w^(1/γ)).
 pub fn write_blend_png(
     path: &Path,
     width: u32,
@@ -134,17 +139,31 @@ pub fn blend_png_bytes(
             format!("must be positive, got {}", opts.gamma),
         ));
     }
-    let mut data = Vec::with_capacity(weights.len() * 2);
+    if !matches!(opts.bits, 8 | 16) {
+        return Err(Error::invalid(
+            "bits",
+            format!("must be 8 or 16, got {}", opts.bits),
+        ));
+    }
+    let mut data = Vec::with_capacity(weights.len() * usize::from(opts.bits / 8));
     for &w in weights {
         let m = f64::from(w.clamp(0.0, 1.0)).powf(1.0 / opts.gamma);
-        data.extend_from_slice(&((m * 65535.0).round() as u16).to_be_bytes());
+        if opts.bits == 8 {
+            data.push((m * 255.0).round() as u8);
+        } else {
+            data.extend_from_slice(&((m * 65535.0).round() as u16).to_be_bytes());
+        }
     }
     let mut out = Vec::new();
     let png_err = |e: png::EncodingError| Error::invalid("png", e.to_string());
     {
         let mut enc = png::Encoder::new(&mut out, width, height);
         enc.set_color(png::ColorType::Grayscale);
-        enc.set_depth(png::BitDepth::Sixteen);
+        enc.set_depth(if opts.bits == 8 {
+            png::BitDepth::Eight
+        } else {
+            png::BitDepth::Sixteen
+        });
         enc.add_text_chunk("omniwarp.blend_gamma".into(), format!("{}", opts.gamma))
             .map_err(png_err)?;
         let mut w = enc.write_header().map_err(png_err)?;

@@ -212,6 +212,9 @@ pub struct MpcdiQuery {
     version: Option<String>,
     #[serde(default)]
     tolerance: Option<f64>,
+    /// Bits of the alpha maps: 8 (the default; what readers decode) or 16.
+    #[serde(default)]
+    alpha_bits: Option<u8>,
 }
 
 pub async fn mpcdi_package(
@@ -245,6 +248,13 @@ pub async fn mpcdi_package(
             Profile::A3 => TOL_A3_MM,
         },
     )?;
+    let alpha_bits = q.alpha_bits.unwrap_or(mpcdi::ALPHA_BITS);
+    if !matches!(alpha_bits, 8 | 16) {
+        return Err(ApiError::Invalid {
+            field: "alpha_bits".into(),
+            reason: format!("must be 8 or 16, got {alpha_bits}"),
+        });
+    }
     let (rig, _) = s.store.snapshot();
     let mut jobs = Vec::new();
     for ch in &rig.channels {
@@ -262,7 +272,7 @@ pub async fn mpcdi_package(
         let mut worst = 0.0f64;
         for (id, j) in jobs {
             let o = owned(j, &id)?;
-            let (region, err) = o.sources(cancel).region(profile, tol)?;
+            let (region, err) = o.sources(cancel).region(profile, tol, alpha_bits)?;
             worst = worst.max(err);
             regions.push(region);
         }

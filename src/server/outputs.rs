@@ -115,11 +115,18 @@ pub async fn blend(
     let gamma = q.gamma.unwrap_or(2.2);
     let (w, h, computed) = (ch.width, ch.height, j.computed.clone());
     let bytes = run_job(&s, move |_| {
-        blend_png_bytes(w, h, &computed.geometry.weights, BlendOptions { gamma }).map_err(|e| {
-            ApiError::Invalid {
-                field: "gamma".into(),
-                reason: e.reason(),
-            }
+        blend_png_bytes(
+            w,
+            h,
+            &computed.geometry.weights,
+            BlendOptions {
+                gamma,
+                ..BlendOptions::default()
+            },
+        )
+        .map_err(|e| ApiError::Invalid {
+            field: "gamma".into(),
+            reason: e.reason(),
         })
     })
     .await?;
