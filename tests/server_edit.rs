@@ -1264,3 +1264,77 @@ async fn mpcdi_alpha_maps_are_8_bit_unless_asked_and_decode_in_an_8_bit_reader()
         );
     }
 }
+
+/// Bourke mesh intensity along the wall's edge (issue 20, item 4): the demo rig's `centre`
+/// projector reaches over the cylinder's top and bottom edges; a reader interpolating node
+/// intensities bilinearly must give every lit pixel its blend weight, so the nodes just off the
+/// wall carry weights extrapolated from the lit pixels, not the 0 of an unlit one (before:
+/// the lit pixels along both edges were darkened).
+#[tokio::test]
+async fn bourke_meshes_give_lit_pixels_their_weight_at_the_wall_edge() {
+    let demo = state_with(
+        None,
+        None,
+        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+    );
+    let (st, _, body) = call(
+        &demo,
+        get("/v1/channels/centre/exports/mesh.data?tolerance=2"),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let mesh = bourke::read_mesh(std::str::from_utf8(&body).unwrap()).unwrap();
+    let (_, _, png) = call(&demo, get("/v1/channels/centre/blend.png?gamma=1")).await;
+    let blend = image::load_from_memory(&png).unwrap().into_luma16();
+    let (_, _, exr) = call(&demo, get("/v1/channels/centre/warp.exr")).await;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("w.exr"), &exr).unwrap();
+    let warp = omniwarp::normalmap::NormalMap::read(&dir.path().join("w.exr")).unwrap();
+    let (w, h) = (warp.width(), warp.height());
+    let (nx, ny) = (mesh.nx, mesh.ny);
+    // Intensity by node, top row first (the file is bottom row first).
+    let i_at = |k: usize, l: usize| mesh.nodes[(ny - 1 - l) * nx + k][4].max(0.0);
+    // Whether a node lies off the wall (its pixel unlit).
+    let off = |k: usize, l: usize| {
+        let x = (k as f64 * w as f64 / (nx - 1) as f64 - 0.5)
+            .round()
+            .clamp(0.0, (w - 1) as f64);
+        let y = (l as f64 * h as f64 / (ny - 1) as f64 - 0.5)
+            .round()
+            .clamp(0.0, (h - 1) as f64);
+        warp.direction(x as usize, y as usize).is_none()
+    };
+    // Only the cells across the wall's edge: elsewhere a coarse grid's bilinear intensity
+    // misses the blend ramps by the tolerance the grid was chosen for, which is another matter.
+    let (mut lit, mut dark) = (0usize, 0usize);
+    for j in 0..h {
+        for i in 0..w {
+            let weight = f64::from(blend.get_pixel(i as u32, j as u32)[0]) / 65535.0;
+            if warp.direction(i, j).is_none() || weight < 0.05 {
+                continue;
+            }
+            let gx = ((i as f64 + 0.5) * (nx - 1) as f64 / w as f64).min((nx - 1) as f64 - 1e-9);
+            let gy = ((j as f64 + 0.5) * (ny - 1) as f64 / h as f64).min((ny - 1) as f64 - 1e-9);
+            let (k, l) = (gx.floor() as usize, gy.floor() as usize);
+            if !(off(k, l) || off(k + 1, l) || off(k, l + 1) || off(k + 1, l + 1)) {
+                continue;
+            }
+            lit += 1;
+            let (fx, fy) = (gx - k as f64, gy - l as f64);
+            let shown = (1.0 - fx) * (1.0 - fy) * i_at(k, l)
+                + fx * (1.0 - fy) * i_at(k + 1, l)
+                + (1.0 - fx) * fy * i_at(k, l + 1)
+                + fx * fy * i_at(k + 1, l + 1);
+            dark += usize::from(shown < 0.9 * weight);
+        }
+    }
+    eprintln!(
+        "{dark} of {lit} lit pixels in cells across the wall's edge get less than 0.9 of their weight"
+    );
+    assert!(
+        lit > 10_000,
+        "the projector reaches past the wall's edge: {lit}"
+    );
+    // Measured: 3,397 of 210,588 (the blend ramps inside those cells); 159,411 before.
+    assert!(dark * 20 < lit, "{dark} of {lit} lit pixels darkened");
+}

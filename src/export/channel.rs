@@ -185,22 +185,44 @@ impl Sources<'_> {
         ))
     }
 
-    /// Paul Bourke mesh text with its grid, intensity = blend weight.
+    /// Paul Bourke mesh text with its grid, intensity = blend weight. Readers interpolate the
+    /// intensity across each cell, so a node just off the wall, which a cell reaching the wall
+    /// draws, takes the weight of the lit pixel nearest it (within a cell) rather than the 0 of
+    /// an unlit pixel, which would darken the lit part of the cell. Held, not extrapolated: a
+    /// weight's gradient carried over a whole cell overshoots to 0 or past 1.
     pub fn bourke(&self, tol: Tolerance) -> Result<(String, Chosen<2>)> {
         let c = self.choose_2d(tol)?;
-        let weights: Vec<Option<[f64; 1]>> =
-            self.weights.iter().map(|w| Some([f64::from(*w)])).collect();
-        let wgrid = grid::sample(
-            &weights,
-            self.width,
-            self.height,
-            c.grid.columns,
-            c.grid.rows,
-        );
-        let intensity: Vec<f64> = wgrid
-            .samples
-            .iter()
-            .map(|s| s.map_or(0.0, |v| v[0]))
+        let (w, h) = (self.width, self.height);
+        let (nx, ny) = (c.grid.columns, c.grid.rows);
+        let reach = |size: usize, n: usize| (size as f64 / (n.max(2) - 1) as f64).ceil() as i64;
+        let (rx, ry) = (reach(w, nx), reach(h, ny));
+        let lit = |i: i64, j: i64| {
+            (i >= 0 && j >= 0 && (i as usize) < w && (j as usize) < h)
+                .then_some((i as usize, j as usize))
+                .filter(|&(i, j)| self.points[j * w + i].is_some())
+                .map(|(i, j)| f64::from(self.weights[j * w + i]))
+        };
+        let intensity: Vec<f64> = (0..nx * ny)
+            .map(|n| {
+                let x = grid::position(n % nx, nx, w).round() as i64;
+                let y = grid::position(n / nx, ny, h).round() as i64;
+                if let Some(v) = lit(x.clamp(0, w as i64 - 1), y.clamp(0, h as i64 - 1)) {
+                    return v;
+                }
+                // The nearest lit pixel within a cell, by squared distance.
+                let mut best: Option<(i64, f64)> = None;
+                for j in y - ry..=y + ry {
+                    for i in x - rx..=x + rx {
+                        if let Some(v) = lit(i, j) {
+                            let d = (i - x).pow(2) + (j - y).pow(2);
+                            if best.is_none_or(|(bd, _)| d < bd) {
+                                best = Some((d, v));
+                            }
+                        }
+                    }
+                }
+                best.map_or(0.0, |(_, v)| v)
+            })
             .collect();
         let text = bourke::mesh_text(&c.grid, &intensity, self.width as f64 / self.height as f64)?;
         Ok((text, c))
