@@ -4,6 +4,7 @@
 
 use super::build::{Source, from_source, grid_of};
 use super::raster::unwrap_deg;
+use super::refine::grid as grid_parts;
 use super::{Feature, Layout, TileScreen};
 use crate::error::{Error, Result};
 use glam::DVec3;
@@ -80,20 +81,6 @@ pub enum Edit {
 
 /// The tolerance of `coarsen` and `refine` when none is given, degrees.
 pub const REFINE_TOLERANCE: f64 = 0.01;
-
-fn grid_parts(t: &TileScreen) -> Result<(usize, usize, &Vec<Feature>)> {
-    match &t.layout {
-        Layout::Grid {
-            columns,
-            rows,
-            features,
-        } => Ok((*columns, *rows, features)),
-        Layout::Soup { .. } => Err(Error::invalid(
-            "tiles",
-            "this edit needs a grid, not a triangle soup",
-        )),
-    }
-}
 
 fn index_in(name: &str, i: usize, n: usize) -> Result<usize> {
     if i < n {

@@ -65,7 +65,8 @@ fn fold_phi(phi: f64) -> f64 {
     }
 }
 
-fn grid(t: &TileScreen) -> Result<(usize, usize, &[Feature])> {
+/// A grid screen's columns, rows and features; an error naming `tiles` for a triangle soup.
+pub fn grid(t: &TileScreen) -> Result<(usize, usize, &[Feature])> {
     match &t.layout {
         Layout::Grid {
             columns,
