@@ -433,7 +433,7 @@ fn edit() -> impl Strategy<Value = Edit> {
 }
 
 fn mpcdi_seed() -> Vec<u8> {
-    use omniwarp::export::mpcdi::{Profile, Region, Version, package};
+    use omniwarp::export::mpcdi::{Header, Profile, Reader, Region, Version, package};
     let (w, h) = (8u32, 6u32);
     let alpha = omniwarp::rig::blend_png_bytes(
         w,
@@ -446,9 +446,18 @@ fn mpcdi_seed() -> Vec<u8> {
     let region = Region {
         id: "a".into(),
         resolution: [w, h],
+        buffer: 0,
+        rect: [0.25, 0.5, 0.5, 0.25],
         warp: (3, 2, samples),
         alpha_png: alpha,
         alpha_bits: 16,
     };
-    package(Version::V2, Profile::TwoD, &[region], 0).unwrap()
+    let header = Header {
+        version: Version::V2,
+        profile: Profile::TwoD,
+        reader: Reader::Vesa,
+        buffers: vec![[32, 24]],
+        unix_time: 0,
+    };
+    package(&header, &[region]).unwrap()
 }

@@ -6,8 +6,9 @@ mod common;
 
 use axum::http::{StatusCode, header};
 use common::server::{call, flat_rig, get, json, state, state_with, write};
+use omniwarp::export::grid::Layout;
 use omniwarp::export::mpcdi;
-use omniwarp::export::{bourke, grid, parse_pfm};
+use omniwarp::export::{bourke, parse_pfm};
 use std::time::Duration;
 
 fn edits(list: serde_json::Value) -> String {
@@ -582,20 +583,35 @@ async fn mpcdi_packages_use_the_reference_spellings_and_blank_unknown_samples() 
                 (Some("1"), Some("1"))
             );
         }
-        let b = &pkg.buffers[0];
-        assert_eq!((b.resolution, b.regions.len()), ([384, 108], 2));
-        assert_eq!(b.regions[1].rect, [0.5, 0.0, 0.5, 1.0]);
-        for r in &b.regions {
+        let regions: Vec<_> = pkg.buffers.iter().flat_map(|b| &b.regions).collect();
+        if profile == "a3" {
+            // The projectors side by side.
+            let b = &pkg.buffers[0];
+            assert_eq!((b.resolution, b.regions.len()), ([384, 108], 2));
+            assert_eq!(b.regions[1].rect, [0.5, 0.0, 0.5, 1.0]);
+        } else {
+            // One buffer per canvas played, a region the part of it a projector shows.
+            let sizes: Vec<_> = pkg.buffers.iter().map(|b| b.resolution).collect();
+            assert_eq!(sizes, [[4096, 2048], [100, 50]]);
+            assert_eq!(pkg.buffers[1].regions[0].id, "right");
+            for r in &regions {
+                let [x, y, w, h] = r.rect;
+                assert!(x >= 0.0 && y >= 0.0 && x + w <= 1.0 + 1e-9 && y + h <= 1.0 + 1e-9);
+            }
+        }
+        for r in regions {
             let (gw, gh, samples) = &r.warp;
             let (aw, ah, alpha) = &r.alpha;
             assert_eq!(([*aw, *ah], r.gamma_embedded), (r.resolution, 2.2));
             // Every NaN sample has alpha 0 at its pixel.
             for (n, p) in samples.iter().enumerate() {
                 let (i, j) = (n % gw, n / gw);
-                let x = grid::position(i, *gw, *aw as usize)
+                let x = Layout::Edges
+                    .position(i, *gw, *aw as usize)
                     .round()
                     .clamp(0.0, f64::from(*aw - 1)) as usize;
-                let y = grid::position(j, *gh, *ah as usize)
+                let y = Layout::Edges
+                    .position(j, *gh, *ah as usize)
                     .round()
                     .clamp(0.0, f64::from(*ah - 1)) as usize;
                 if p[0].is_nan() {
@@ -619,6 +635,20 @@ async fn mpcdi_packages_use_the_reference_spellings_and_blank_unknown_samples() 
     assert!(
         (f("2d", "left") - f("a3", "left")).abs() < 0.05,
         "{unknown:?}"
+    );
+    // Reader profiles: PyMPCDI measures region y up from the bottom; WATCHOUT reads v1.0.
+    let region = |body: &[u8]| mpcdi::read(body).unwrap().buffers[0].regions[0].rect;
+    let (_, _, vesa) = call(&s, get("/v1/export.mpcdi")).await;
+    let (st, _, py) = call(&s, get("/v1/export.mpcdi?reader=pympcdi")).await;
+    assert_eq!(st, StatusCode::OK);
+    let ([_, y, _, h], [_, y_up, _, h_up]) = (region(&vesa), region(&py));
+    assert!((h - h_up).abs() < 1e-8 && (y_up - (1.0 - y - h)).abs() < 1e-8);
+    let (_, _, wo) = call(&s, get("/v1/export.mpcdi?reader=watchout")).await;
+    assert_eq!(mpcdi::read(&wo).unwrap().attr("version"), Some("1.0"));
+    let (st, _, body) = call(&s, get("/v1/export.mpcdi?reader=resolume")).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("reader"))
     );
     let (st, _, body) = call(&s, get("/v1/export.mpcdi?profile=3d")).await;
     assert_eq!(

@@ -18,9 +18,10 @@ pub enum ExportFormat {
     Pfm2d,
     /// Paul Bourke warp mesh (type 2) on a grid sized from --tolerance.
     Mesh,
-    /// The whole rig as an MPCDI v2.0 package, 2d profile (every channel, one canvas).
+    /// The whole rig as an MPCDI package, 2d profile: the canvas as the buffer, a region per
+    /// channel, in the --reader's conventions.
     Mpcdi,
-    /// The whole rig as an MPCDI v2.0 package, a3 profile.
+    /// The whole rig as an MPCDI package, a3 profile (the projectors side by side).
     MpcdiA3,
 }
 
@@ -50,9 +51,15 @@ pub struct ExportArgs {
     /// The ymap file for --format remap.
     #[arg(long)]
     ymap: Option<PathBuf>,
-    /// MPCDI version written: 1.0 (WATCHOUT 6 and other older readers) or 2.0.
-    #[arg(long, default_value = "2.0", value_parser = ["1.0", "2.0"])]
-    mpcdi_version: String,
+    /// MPCDI version written: 1.0 (WATCHOUT 6 and other older readers) or 2.0; by default the
+    /// one the --reader takes (2.0 but for watchout).
+    #[arg(long, value_parser = ["1.0", "2.0"])]
+    mpcdi_version: Option<String>,
+    /// Whose conventions an MPCDI 2d package follows (region y and v direction, PFM row order,
+    /// node placement; docs/mpcdi.md): vesa (the reference library, nDisplay and the media
+    /// servers built on it), ndisplay, watchout, pympcdi or sgct.
+    #[arg(long, default_value = "vesa", value_parser = ["vesa", "ndisplay", "watchout", "pympcdi", "sgct"])]
+    reader: String,
     /// Bits of the MPCDI alpha maps: 8 (what readers decode) or 16.
     #[arg(long, default_value = "8", value_parser = ["8", "16"])]
     alpha_bits: String,
@@ -89,6 +96,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
             mpcdi::Profile::TwoD => Some(a.canvas.view(cw, chh)?),
             mpcdi::Profile::A3 => None,
         };
+        let reader = mpcdi::Reader::parse(&a.reader, "--reader")?;
         let mut regions = Vec::new();
         for ch in &rig.channels {
             let warp = rig.warp(ch);
@@ -109,22 +117,28 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 cancel: &never,
             };
             let bits = if a.alpha_bits == "16" { 16 } else { 8 };
-            let (region, err) = src.region(profile, tol, bits)?;
+            let (region, err) = src.region(profile, tol, bits, reader)?;
             eprintln!(
                 "{}: {}×{} grid, worst error {err:.4}",
                 ch.id, region.warp.0, region.warp.1
             );
             regions.push(region);
         }
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_secs());
-        let version = if a.mpcdi_version == "1.0" {
-            mpcdi::Version::V1
-        } else {
-            mpcdi::Version::V2
+        let buffers = match profile {
+            mpcdi::Profile::TwoD => vec![[cw, chh]],
+            mpcdi::Profile::A3 => mpcdi::side_by_side(&mut regions),
         };
-        write(&mpcdi::package(version, profile, &regions, now)?)?;
+        let header = mpcdi::Header {
+            version: match &a.mpcdi_version {
+                Some(v) => mpcdi::Version::parse(v, "--mpcdi-version")?,
+                None => reader.version(),
+            },
+            profile,
+            reader,
+            buffers,
+            unix_time: mpcdi::unix_now(),
+        };
+        write(&mpcdi::package(&header, &regions)?)?;
         return Ok(());
     }
     let id = a

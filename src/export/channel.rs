@@ -3,8 +3,8 @@
 //! from them. Shared by the CLI and the daemon.
 
 use super::bourke;
-use super::grid::{self, Chosen};
-use super::mpcdi::{self, Profile, Region};
+use super::grid::{self, Chosen, Layout};
+use super::mpcdi::{self, Profile, Reader, Region};
 use crate::error::{Error, Result};
 use crate::rig::{BlendOptions, blend_png_bytes};
 use glam::DVec3;
@@ -84,29 +84,85 @@ impl Sources<'_> {
     /// Content (x, y) grid of the 2d meaning: B = NaN (no error estimate), NaN where unknown;
     /// samples past the canvas edge keep their (outside [0, 1]) coordinates, alpha hides them.
     pub fn grid_2d(&self, tol: Tolerance) -> Result<(Chosen<2>, Vec<[f32; 3]>)> {
-        let c = self.choose_2d(tol)?;
-        let rows = c
-            .grid
-            .samples
-            .iter()
-            .map(|s| match s {
-                Some([u, v]) => [*u as f32, *v as f32, f32::NAN],
-                None => [f32::NAN; 3],
-            })
-            .collect();
+        let c = self.choose_2d(self.uv, self.uv_scale(), Layout::Edges, tol)?;
+        let rows = rows_2d(&c);
         Ok((c, rows))
     }
 
-    fn choose_2d(&self, tol: Tolerance) -> Result<Chosen<2>> {
+    fn choose_2d(
+        &self,
+        field: &[Option<[f64; 2]>],
+        scale: [f64; 2],
+        layout: Layout,
+        tol: Tolerance,
+    ) -> Result<Chosen<2>> {
         let c = grid::choose(
-            self.uv,
+            field,
             self.width,
             self.height,
             tol.0,
-            self.uv_scale(),
+            scale,
+            layout,
             self.cancel,
         )?;
         tol.met(c, "tolerance")
+    }
+
+    /// The sub-rectangle of the canvas this channel shows, normalised, top-left origin: the
+    /// bounding box of its lit pixels' content coordinates, padded by the tolerance and a
+    /// content pixel (a reader that cuts the region out and filters it reads that far),
+    /// clamped to the canvas. The whole canvas when nothing is shown.
+    pub fn region_rect(&self, tol: Tolerance) -> [f64; 4] {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (uv, p) in self.uv.iter().zip(self.points) {
+            if let (Some(uv), Some(_)) = (uv, p)
+                && super::inside(*uv)
+            {
+                for c in 0..2 {
+                    lo[c] = lo[c].min(uv[c]);
+                    hi[c] = hi[c].max(uv[c]);
+                }
+            }
+        }
+        if lo[0] > hi[0] {
+            return [0.0, 0.0, 1.0, 1.0];
+        }
+        let scale = self.uv_scale();
+        let mut rect = [0.0; 4];
+        for c in 0..2 {
+            let pad = (tol.0 + 1.0) / scale[c];
+            let (a, b) = ((lo[c] - pad).max(0.0), (hi[c] + pad).min(1.0));
+            rect[c] = a;
+            rect[c + 2] = (b - a).max(1.0 / scale[c]);
+        }
+        rect
+    }
+
+    /// The 2d warp of `reader`: content coordinates relative to `rect` (top-left origin) with v
+    /// turned up for readers that measure it from the bottom, sampled where the reader places
+    /// nodes; the tolerance stays in content pixels.
+    fn grid_2d_in(
+        &self,
+        rect: [f64; 4],
+        reader: Reader,
+        tol: Tolerance,
+    ) -> Result<(Chosen<2>, Vec<[f32; 3]>)> {
+        let [x, y, w, h] = rect;
+        let up = reader.v_up();
+        let field: Vec<Option<[f64; 2]>> = self
+            .uv
+            .iter()
+            .map(|p| {
+                p.map(|[u, v]| {
+                    let (u, v) = ((u - x) / w, (v - y) / h);
+                    [u, if up { 1.0 - v } else { v }]
+                })
+            })
+            .collect();
+        let [sx, sy] = self.uv_scale();
+        let c = self.choose_2d(&field, [sx * w, sy * h], reader.layout(), tol)?;
+        let rows = rows_2d(&c);
+        Ok((c, rows))
     }
 
     /// Wall X, Y, Z grid of the a3 meaning, metres from the eye, NaN where unknown.
@@ -117,6 +173,7 @@ impl Sources<'_> {
             self.height,
             tol.0,
             [1000.0; 3],
+            Layout::Edges,
             self.cancel,
         )?;
         let c = tol.met(c, "tolerance")?;
@@ -155,28 +212,37 @@ impl Sources<'_> {
         )
     }
 
-    /// The channel's MPCDI region (alpha map of `alpha_bits`, 8 or 16) and the worst
-    /// interpolation error of its grid.
+    /// The channel's MPCDI region for `reader` (alpha map of `alpha_bits`, 8 or 16) and the
+    /// worst interpolation error of its grid as that reader interpolates it. A 2d region's
+    /// rectangle is its part of the canvas (y measured as the reader measures it), in buffer 0
+    /// unless the caller files it under its canvas's; an a3 region's is set when the regions
+    /// are laid side by side ([`mpcdi::side_by_side`]).
     pub fn region(
         &self,
         profile: Profile,
         tol: Tolerance,
         alpha_bits: u8,
+        reader: Reader,
     ) -> Result<(Region, f64)> {
-        let (columns, rows, samples, err) = match profile {
+        let (rect, columns, rows, samples, err) = match profile {
             Profile::TwoD => {
-                let (c, s) = self.grid_2d(tol)?;
-                (c.grid.columns, c.grid.rows, s, c.max_error)
+                let rect = self.region_rect(tol);
+                let (c, s) = self.grid_2d_in(rect, reader, tol)?;
+                let [x, y, w, h] = rect;
+                let y = if reader.v_up() { 1.0 - y - h } else { y };
+                ([x, y, w, h], c.grid.columns, c.grid.rows, s, c.max_error)
             }
             Profile::A3 => {
                 let (c, s) = self.grid_a3(tol)?;
-                (c.grid.columns, c.grid.rows, s, c.max_error)
+                ([0.0; 4], c.grid.columns, c.grid.rows, s, c.max_error)
             }
         };
         Ok((
             Region {
                 id: self.id.to_string(),
                 resolution: [self.width as u32, self.height as u32],
+                buffer: 0,
+                rect,
                 warp: (columns, rows, samples),
                 alpha_png: self.alpha_png(profile, alpha_bits)?,
                 alpha_bits,
@@ -191,7 +257,7 @@ impl Sources<'_> {
     /// an unlit pixel, which would darken the lit part of the cell. Held, not extrapolated: a
     /// weight's gradient carried over a whole cell overshoots to 0 or past 1.
     pub fn bourke(&self, tol: Tolerance) -> Result<(String, Chosen<2>)> {
-        let c = self.choose_2d(tol)?;
+        let c = self.choose_2d(self.uv, self.uv_scale(), Layout::Edges, tol)?;
         let (w, h) = (self.width, self.height);
         let (nx, ny) = (c.grid.columns, c.grid.rows);
         let reach = |size: usize, n: usize| (size as f64 / (n.max(2) - 1) as f64).ceil() as i64;
@@ -204,8 +270,8 @@ impl Sources<'_> {
         };
         let intensity: Vec<f64> = (0..nx * ny)
             .map(|n| {
-                let x = grid::position(n % nx, nx, w).round() as i64;
-                let y = grid::position(n / nx, ny, h).round() as i64;
+                let x = Layout::Edges.position(n % nx, nx, w).round() as i64;
+                let y = Layout::Edges.position(n / nx, ny, h).round() as i64;
                 if let Some(v) = lit(x.clamp(0, w as i64 - 1), y.clamp(0, h as i64 - 1)) {
                     return v;
                 }
@@ -227,4 +293,16 @@ impl Sources<'_> {
         let text = bourke::mesh_text(&c.grid, &intensity, self.width as f64 / self.height as f64)?;
         Ok((text, c))
     }
+}
+
+/// A 2d grid as PFM samples: B = NaN (no error estimate), NaN where unknown.
+fn rows_2d(c: &Chosen<2>) -> Vec<[f32; 3]> {
+    c.grid
+        .samples
+        .iter()
+        .map(|s| match s {
+            Some([u, v]) => [*u as f32, *v as f32, f32::NAN],
+            None => [f32::NAN; 3],
+        })
+        .collect()
 }

@@ -2,32 +2,61 @@
 //! uniform grid the reader interpolates bilinearly, with the grid's density chosen from an error
 //! tolerance rather than fixed.
 //!
-//! The samples fill the image edge to edge: the first and last of a row lie on the image's left
-//! and right edges (normalised position i / (n − 1)), as MPCDI readers (nDisplay builds its mesh
-//! with UV = i / (n − 1)) and Paul Bourke's meshes place them. A reader interpolating between
-//! cell centres instead would have to clamp half a cell at every border. Positions below are in
-//! pixel-centre coordinates, pixel (0, 0)'s centre at (0, 0), as lens models and tile screens
-//! count them, so sample 0 sits at −½.
+//! Readers place the samples in one of two ways ([`Layout`]): edge to edge, the first and last of
+//! a row on the image's left and right edges (normalised position i / (n − 1)), as nDisplay's
+//! mesh builder, SGCT and Paul Bourke's meshes do; or at cell centres ((i + ½) / n), as a reader
+//! that uploads the grid as a texture and samples it at each pixel does (PyMPCDI), clamping
+//! half a cell at every border. Positions below are in pixel-centre coordinates, pixel (0, 0)'s
+//! centre at (0, 0), as lens models and tile screens count them, so edge-to-edge sample 0 sits
+//! at −½.
 
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Where a reader places a grid's samples on the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// Sample i of n at normalised position i / (n − 1): the outer samples on the image edges.
+    Edges,
+    /// Sample i of n at (i + ½) / n, the centre of its cell: a grid read as a texture.
+    Centres,
+}
+
+impl Layout {
+    /// Pixel-centre position of sample `i` of `n` across an image `size` pixels wide.
+    pub fn position(self, i: usize, n: usize, size: usize) -> f64 {
+        match self {
+            Layout::Edges => i as f64 * size as f64 / (n - 1) as f64 - 0.5,
+            Layout::Centres => (i as f64 + 0.5) * size as f64 / n as f64 - 0.5,
+        }
+    }
+
+    /// Inverse of [`Layout::position`]: the (fractional) sample index at pixel-centre
+    /// coordinate `p`.
+    pub fn index(self, p: f64, n: usize, size: usize) -> f64 {
+        match self {
+            Layout::Edges => (p + 0.5) * (n - 1) as f64 / size as f64,
+            Layout::Centres => (p + 0.5) * n as f64 / size as f64 - 0.5,
+        }
+    }
+
+    /// The grid that reproduces a field exactly: a sample on every pixel corner (edges) or
+    /// centre (centres).
+    fn exact(self, width: usize, height: usize) -> (usize, usize) {
+        match self {
+            Layout::Edges => (width + 1, height + 1),
+            Layout::Centres => (width, height),
+        }
+    }
+}
 
 /// A uniform grid of samples, row-major from the top row; `None` where the field has none.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid<const N: usize> {
     pub columns: usize,
     pub rows: usize,
+    pub layout: Layout,
     pub samples: Vec<Option<[f64; N]>>,
-}
-
-/// Pixel-centre position of sample `i` of `n` across an image `size` pixels wide.
-pub fn position(i: usize, n: usize, size: usize) -> f64 {
-    i as f64 * size as f64 / (n - 1) as f64 - 0.5
-}
-
-/// Inverse of [`position`]: the (fractional) sample index at pixel-centre coordinate `p`.
-fn index(p: f64, n: usize, size: usize) -> f64 {
-    (p + 0.5) * (n - 1) as f64 / size as f64
 }
 
 /// Bilinear weights and the four corner indices around fractional index (gx, gy) of a
@@ -93,14 +122,15 @@ pub fn sample<const N: usize>(
     height: usize,
     columns: usize,
     rows: usize,
+    layout: Layout,
 ) -> Grid<N> {
     let reach_x = (width as f64 / (columns.max(2) - 1) as f64).ceil() as isize;
     let reach_y = (height as f64 / (rows.max(2) - 1) as f64).ceil() as isize;
     let samples = (0..columns * rows)
         .into_par_iter()
         .map(|n| {
-            let x = position(n % columns, columns, width);
-            let y = position(n / columns, rows, height);
+            let x = layout.position(n % columns, columns, width);
+            let y = layout.position(n / columns, rows, height);
             // Nodes on the image's outer edges lie half a pixel beyond the outermost centres:
             // extrapolate there too rather than let interpolation clamp.
             let within =
@@ -114,6 +144,7 @@ pub fn sample<const N: usize>(
     Grid {
         columns,
         rows,
+        layout,
         samples,
     }
 }
@@ -174,8 +205,8 @@ fn nearest_valid<const N: usize>(
 impl<const N: usize> Grid<N> {
     /// What a reader interpolating this grid shows at pixel (i, j).
     pub fn at_pixel(&self, i: usize, j: usize, width: usize, height: usize) -> Option<[f64; N]> {
-        let gx = index(i as f64, self.columns, width);
-        let gy = index(j as f64, self.rows, height);
+        let gx = self.layout.index(i as f64, self.columns, width);
+        let gy = self.layout.index(j as f64, self.rows, height);
         interpolate(&self.samples, self.columns, self.rows, gx, gy)
     }
 
@@ -219,8 +250,8 @@ pub struct Chosen<const N: usize> {
 }
 
 /// The coarsest grid (columns growing by about √2 per step, rows keeping the image's aspect)
-/// whose worst interpolation error is within `tolerance`; one sample per pixel corner when none
-/// is. Grids stop at [`crate::limits::EXPORT_NODES`]: the finest grid tried is returned, and
+/// whose worst interpolation error is within `tolerance`, its samples placed as `layout` says;
+/// the exact grid ([`Layout::exact`]) when none is. Grids stop at [`crate::limits::EXPORT_NODES`]: the finest grid tried is returned, and
 /// the caller compares its `max_error` with the tolerance. [`Error::Cancelled`] once `cancel`
 /// is set.
 ///
@@ -231,6 +262,7 @@ pub fn choose<const N: usize>(
     height: usize,
     tolerance: f64,
     scale: [f64; N],
+    layout: Layout,
     cancel: &AtomicBool,
 ) -> crate::Result<Chosen<N>> {
     let fits = |c: usize, r: usize| {
@@ -241,7 +273,7 @@ pub fn choose<const N: usize>(
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled);
         }
-        let grid = sample(field, width, height, columns, rows);
+        let grid = sample(field, width, height, columns, rows, layout);
         let max_error = grid.max_error(field, width, height, scale);
         Ok(Chosen { grid, max_error })
     };
@@ -259,9 +291,10 @@ pub fn choose<const N: usize>(
         finest = Some(c);
         columns = ((columns as f64 * std::f64::consts::SQRT_2).ceil() as usize).max(columns + 1);
     }
+    let (columns, rows) = layout.exact(width, height);
     match finest {
-        Some(c) if !fits(width + 1, height + 1) => Ok(c),
-        _ => try_grid(width + 1, height + 1),
+        Some(c) if !fits(columns, rows) => Ok(c),
+        _ => try_grid(columns, rows),
     }
 }
 
@@ -281,9 +314,16 @@ mod tests {
     }
 
     /// A reader written independently: normalised position u = (p + ½) / size, sample index
-    /// u · (n − 1), bilinear between samples.
+    /// u · (n − 1) (edges) or u · n − ½ clamped to the grid, as a texture sampler clamps to its
+    /// edge (centres), bilinear between samples.
     fn read(g: &Grid<2>, w: usize, h: usize, i: usize, j: usize) -> Option<[f64; 2]> {
-        let to = |p: f64, n: usize, size: usize| (p + 0.5) / size as f64 * (n - 1) as f64;
+        let to = |p: f64, n: usize, size: usize| {
+            let u = (p + 0.5) / size as f64;
+            match g.layout {
+                Layout::Edges => u * (n - 1) as f64,
+                Layout::Centres => (u * n as f64 - 0.5).clamp(0.0, (n - 1) as f64),
+            }
+        };
         let (gx, gy) = (to(i as f64, g.columns, w), to(j as f64, g.rows, h));
         let (x0, y0) = (gx.floor() as usize, gy.floor() as usize);
         let (x1, y1) = ((x0 + 1).min(g.columns - 1), (y0 + 1).min(g.rows - 1));
@@ -308,27 +348,33 @@ mod tests {
     fn chosen_grids_meet_the_tolerance_as_an_independent_reader_sees_them() {
         let (w, h) = (160, 90);
         let f = field(w, h);
-        let mut columns = Vec::new();
-        for tol in [0.05, 0.2, 1.0] {
-            let c = choose(&f, w, h, tol, [1.0, 1.0], &AtomicBool::new(false)).unwrap();
-            assert!(c.max_error <= tol, "{tol}: {}", c.max_error);
-            let mut worst = 0.0f64;
-            for j in 0..h {
-                for i in 0..w {
-                    if let Some(e) = f[j * w + i] {
-                        let got = read(&c.grid, w, h, i, j).expect("every valid pixel covered");
-                        worst = worst.max((got[0] - e[0]).hypot(got[1] - e[1]));
+        for layout in [Layout::Edges, Layout::Centres] {
+            let mut columns = Vec::new();
+            for tol in [0.05, 0.2, 1.0] {
+                let c = choose(&f, w, h, tol, [1.0, 1.0], layout, &AtomicBool::new(false)).unwrap();
+                assert_eq!(c.grid.layout, layout);
+                assert!(c.max_error <= tol, "{tol}: {}", c.max_error);
+                let mut worst = 0.0f64;
+                for j in 0..h {
+                    for i in 0..w {
+                        if let Some(e) = f[j * w + i] {
+                            let got = read(&c.grid, w, h, i, j).expect("every valid pixel covered");
+                            worst = worst.max((got[0] - e[0]).hypot(got[1] - e[1]));
+                        }
                     }
                 }
+                assert!(
+                    (worst - c.max_error).abs() < 1e-9,
+                    "{tol}: {worst} vs {}",
+                    c.max_error
+                );
+                assert!(c.grid.columns < w / 2, "{tol}: {} columns", c.grid.columns);
+                columns.push(c.grid.columns);
             }
             assert!(
-                (worst - c.max_error).abs() < 1e-9,
-                "{tol}: {worst} vs {}",
-                c.max_error
+                columns.windows(2).all(|p| p[1] < p[0]),
+                "{layout:?}: {columns:?}"
             );
-            assert!(c.grid.columns < w / 2, "{tol}: {} columns", c.grid.columns);
-            columns.push(c.grid.columns);
         }
-        assert!(columns.windows(2).all(|p| p[1] < p[0]), "{columns:?}");
     }
 }

@@ -1,11 +1,21 @@
 //! MPCDI packages (VESA): a ZIP with `mpcdi.xml` and, per region, a warp PFM and an alpha PNG,
-//! every member at the root. One buffer holds the projectors side by side, one region each
-//! (nDisplay makes a viewport of every region).
+//! every member at the root.
+//!
+//! In the 2d (media) profile the buffer is the content canvas the media server plays, at its
+//! pixel size, and each region is the sub-rectangle of it that one projector shows (the
+//! bounding box of what it shows, padded, clamped to the canvas); the warp's coordinates are
+//! relative to the region. That is how readers sample it: PyMPCDI looks the media up at
+//! `x + u·xsize`, nDisplay cuts the region out of the input image. In the a3 profile, which
+//! has no content canvas, the buffer is the projectors side by side, one region each.
+//!
+//! Readers disagree on the vertical direction, the PFM's row order and where the grid's nodes
+//! lie; [`Reader`] names each reader's conventions (docs/mpcdi.md cites the sources).
 //!
 //! The spelling follows the reference reader (tinyxml2, case-sensitive), not the spec's:
 //! `Xresolution`, `Yresolution`, `xsize`, `ysize`, `originof3DData`, and `level` is written in
 //! v2.0 files too. The reader here accepts any letter case.
 
+use super::grid::Layout;
 use crate::error::{Error, Result};
 use std::io::{Cursor, Read, Write};
 
@@ -32,11 +42,107 @@ pub enum Version {
     V2,
 }
 
+impl Version {
+    pub fn parse(s: &str, field: &str) -> Result<Self> {
+        match s {
+            "1.0" => Ok(Version::V1),
+            "2.0" => Ok(Version::V2),
+            other => Err(Error::invalid(
+                field,
+                format!("must be 1.0 or 2.0, got `{other}`"),
+            )),
+        }
+    }
+}
+
+/// The reader a 2d package is written for: readers disagree on three conventions, and a
+/// package can only follow one set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reader {
+    /// The VESA/Scalable reference library and what is built on it: region y and v measured
+    /// down from the top (the spec's "first pixel top-left"), PFM rows bottom to top on disk
+    /// as netpbm says (the library reads them back top-first), nodes edge to edge.
+    Vesa,
+    /// Unreal nDisplay: parses with the VESA library, builds its mesh with UV = i / (n − 1).
+    Ndisplay,
+    /// WATCHOUT: the VESA conventions (its importer's conventions are not published); reads
+    /// MPCDI v1.0.
+    Watchout,
+    /// drwrose/PyMPCDI: region y and v measured up from the bottom (OpenGL's t), the PFM's
+    /// first row on disk drawn at the top, the grid sampled as a texture (nodes at cell
+    /// centres).
+    Pympcdi,
+    /// SGCT's PFM correction mesh (its MPCDI reader was removed in 2024): v up as OpenGL's t,
+    /// the first row on disk at the top, nodes edge to edge.
+    Sgct,
+}
+
+impl Reader {
+    pub const ALL: [Reader; 5] = [
+        Reader::Vesa,
+        Reader::Ndisplay,
+        Reader::Watchout,
+        Reader::Pympcdi,
+        Reader::Sgct,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Reader::Vesa => "vesa",
+            Reader::Ndisplay => "ndisplay",
+            Reader::Watchout => "watchout",
+            Reader::Pympcdi => "pympcdi",
+            Reader::Sgct => "sgct",
+        }
+    }
+
+    pub fn parse(s: &str, field: &str) -> Result<Self> {
+        Reader::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| {
+                Error::invalid(
+                    field,
+                    format!("must be vesa, ndisplay, watchout, pympcdi or sgct, got `{s}`"),
+                )
+            })
+    }
+
+    /// Region y and v measured up from the bottom of the buffer and region.
+    pub fn v_up(self) -> bool {
+        matches!(self, Reader::Pympcdi | Reader::Sgct)
+    }
+
+    /// The PFM's first row on disk is the image's top row (netpbm says bottom).
+    pub fn pfm_top_first(self) -> bool {
+        matches!(self, Reader::Pympcdi | Reader::Sgct)
+    }
+
+    pub fn layout(self) -> Layout {
+        match self {
+            Reader::Pympcdi => Layout::Centres,
+            _ => Layout::Edges,
+        }
+    }
+
+    /// The MPCDI version this reader takes when none is asked for.
+    pub fn version(self) -> Version {
+        match self {
+            Reader::Watchout => Version::V1,
+            _ => Version::V2,
+        }
+    }
+}
+
 /// One projector's region as written.
 #[derive(Debug, Clone)]
 pub struct Region {
     pub id: String,
     pub resolution: [u32; 2],
+    /// Index of its buffer in [`Header::buffers`].
+    pub buffer: usize,
+    /// x, y, xsize, ysize as written, normalised to the buffer.
+    pub rect: [f64; 4],
     /// Warp grid size and samples, rows top to bottom (NaN where unknown).
     pub warp: (usize, usize, Vec<[f32; 3]>),
     /// Grey alpha map at the projector resolution, gamma 2.2 embedded.
@@ -57,6 +163,13 @@ fn escape(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('"', "&quot;")
         .replace('>', "&gt;")
+}
+
+/// Seconds since the Unix epoch, for a package's date (0 if the clock is before it).
+pub fn unix_now() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
 }
 
 /// `yyyy-MM-dd HH:mm:ss` (UTC) of a Unix time.
@@ -80,44 +193,79 @@ fn date(unix: u64) -> String {
     )
 }
 
-/// The `mpcdi.xml` of a package.
-pub fn xml(version: Version, profile: Profile, regions: &[Region], unix_time: u64) -> String {
+/// What a package says beside its regions.
+#[derive(Debug, Clone)]
+pub struct Header {
+    pub version: Version,
+    pub profile: Profile,
+    /// Whose conventions the 2d warps follow (a3 warps are wall points, read alike by all).
+    pub reader: Reader,
+    /// The buffers' pixel sizes: one per content canvas the channels play (2d) or the
+    /// projectors side by side (a3, see [`side_by_side`]).
+    pub buffers: Vec<[u32; 2]>,
+    pub unix_time: u64,
+}
+
+/// Places regions side by side in one buffer, top-aligned (the a3 layout: a 3D profile's buffer
+/// is what the image generator outputs); returns the buffers.
+pub fn side_by_side(regions: &mut [Region]) -> Vec<[u32; 2]> {
     let total_w: u32 = regions.iter().map(|r| r.resolution[0]).sum();
     let max_h = regions.iter().map(|r| r.resolution[1]).max().unwrap_or(0);
-    let root = match version {
-        Version::V1 => format!(
-            r#"<MPCDI profile="{}" level="1" date="{}" version="1.0">"#,
-            profile.name(),
-            date(unix_time)
-        ),
-        Version::V2 => format!(
-            r#"<MPCDI profile="{}" geometry="1" color="1" level="1" date="{}" version="2.0">"#,
-            profile.name(),
-            date(unix_time)
-        ),
-    };
-    let mut x = String::from("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n");
-    x += &root;
-    x += &format!(
-        "\n  <display>\n    <buffer id=\"buffer0\" Xresolution=\"{total_w}\" Yresolution=\"{max_h}\">\n"
-    );
     let mut left = 0u32;
     for r in regions {
         let [w, h] = r.resolution;
-        x += &format!(
-            "      <region id=\"{}\" x=\"{:.9}\" y=\"0\" xsize=\"{:.9}\" ysize=\"{:.9}\" Xresolution=\"{w}\" Yresolution=\"{h}\"/>\n",
-            escape(&r.id),
+        r.buffer = 0;
+        r.rect = [
             f64::from(left) / f64::from(total_w),
+            0.0,
             f64::from(w) / f64::from(total_w),
-            f64::from(h) / f64::from(max_h)
-        );
+            f64::from(h) / f64::from(max_h),
+        ];
         left += w;
     }
-    x += "    </buffer>\n  </display>\n  <files>\n";
+    vec![[total_w, max_h]]
+}
+
+/// The `mpcdi.xml` of a package.
+pub fn xml(h: &Header, regions: &[Region]) -> String {
+    let root = match h.version {
+        Version::V1 => format!(
+            r#"<MPCDI profile="{}" level="1" date="{}" version="1.0">"#,
+            h.profile.name(),
+            date(h.unix_time)
+        ),
+        Version::V2 => format!(
+            r#"<MPCDI profile="{}" geometry="1" color="1" level="1" date="{}" version="2.0">"#,
+            h.profile.name(),
+            date(h.unix_time)
+        ),
+    };
+    // A 2d warp holds content coordinates, not lengths from a point: the VESA library writes
+    // `unknown` for both there.
+    let (unit, origin) = match h.profile {
+        Profile::TwoD => ("unknown", "unknown"),
+        Profile::A3 => ("m", "idealEyePoint"),
+    };
+    let mut x = String::from("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n");
+    x += &root;
+    x += "\n  <display>\n";
+    for (b, [bw, bh]) in h.buffers.iter().enumerate() {
+        x += &format!("    <buffer id=\"buffer{b}\" Xresolution=\"{bw}\" Yresolution=\"{bh}\">\n");
+        for r in regions.iter().filter(|r| r.buffer == b) {
+            let [w, h] = r.resolution;
+            let [rx, ry, rw, rh] = r.rect;
+            x += &format!(
+                "      <region id=\"{}\" x=\"{rx:.9}\" y=\"{ry:.9}\" xsize=\"{rw:.9}\" ysize=\"{rh:.9}\" Xresolution=\"{w}\" Yresolution=\"{h}\"/>\n",
+                escape(&r.id),
+            );
+        }
+        x += "    </buffer>\n";
+    }
+    x += "  </display>\n  <files>\n";
     for r in regions {
         let (id, bits) = (escape(&r.id), r.alpha_bits);
         x += &format!(
-            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>m</geometricUnit>\n        <originof3DData>idealEyePoint</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>{bits}</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n    </fileset>\n"
+            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>{unit}</geometricUnit>\n        <originof3DData>{origin}</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>{bits}</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n    </fileset>\n"
         );
     }
     x += "  </files>\n</MPCDI>\n";
@@ -125,25 +273,34 @@ pub fn xml(version: Version, profile: Profile, regions: &[Region], unix_time: u6
 }
 
 /// The package's bytes.
-pub fn package(
-    version: Version,
-    profile: Profile,
-    regions: &[Region],
-    unix_time: u64,
-) -> Result<Vec<u8>> {
+pub fn package(h: &Header, regions: &[Region]) -> Result<Vec<u8>> {
     let zip_err = |e: zip::result::ZipError| Error::invalid("mpcdi", e.to_string());
     let io_err = |e: std::io::Error| Error::invalid("mpcdi", e.to_string());
     let mut z = zip::ZipWriter::new(Cursor::new(Vec::new()));
     let opts = zip::write::SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Deflated);
     z.start_file("mpcdi.xml", opts).map_err(zip_err)?;
-    z.write_all(xml(version, profile, regions, unix_time).as_bytes())
-        .map_err(io_err)?;
+    z.write_all(xml(h, regions).as_bytes()).map_err(io_err)?;
+    let top_first = h.profile == Profile::TwoD && h.reader.pfm_top_first();
     for r in regions {
         let (gw, gh, samples) = &r.warp;
+        // pfm_bytes writes netpbm's bottom-up order; rows handed over upside down come out
+        // top row first.
+        let flipped;
+        let rows = if top_first && *gw > 0 {
+            flipped = samples
+                .chunks(*gw)
+                .rev()
+                .flatten()
+                .copied()
+                .collect::<Vec<_>>();
+            &flipped
+        } else {
+            samples
+        };
         z.start_file(format!("GeometryWarpFile-{}.pfm", r.id), opts)
             .map_err(zip_err)?;
-        z.write_all(&super::pfm_bytes(*gw, *gh, samples)?)
+        z.write_all(&super::pfm_bytes(*gw, *gh, rows)?)
             .map_err(io_err)?;
         z.start_file(format!("AlphaMap-{}.png", r.id), opts)
             .map_err(zip_err)?;

@@ -8,7 +8,7 @@ use super::jobs::{Job, job, run_job};
 use super::outputs::file;
 use super::state::{AppState, Query};
 use crate::export::channel::{Sources, Tolerance};
-use crate::export::mpcdi::{self, Profile, Version};
+use crate::export::mpcdi::{self, Profile, Reader, Version};
 use crate::export::{content_uv_unbounded, inside, pfm_bytes, remap_pgm_bytes, stmap};
 use crate::image_io::{Precision, exr_bytes};
 use axum::extract::{Path, State};
@@ -215,6 +215,10 @@ pub struct MpcdiQuery {
     /// Bits of the alpha maps: 8 (the default; what readers decode) or 16.
     #[serde(default)]
     alpha_bits: Option<u8>,
+    /// Whose conventions a 2d package follows (vesa, the default; ndisplay, watchout, pympcdi,
+    /// sgct).
+    #[serde(default)]
+    reader: Option<String>,
 }
 
 pub async fn mpcdi_package(
@@ -231,15 +235,13 @@ pub async fn mpcdi_package(
             });
         }
     };
-    let version = match q.version.as_deref().unwrap_or("2.0") {
-        "1.0" => Version::V1,
-        "2.0" => Version::V2,
-        other => {
-            return Err(ApiError::Invalid {
-                field: "version".into(),
-                reason: format!("must be 1.0 or 2.0, got `{other}`"),
-            });
-        }
+    let reader = match q.reader.as_deref() {
+        Some(r) => Reader::parse(r, "reader")?,
+        None => Reader::Vesa,
+    };
+    let version = match q.version.as_deref() {
+        Some(v) => Version::parse(v, "version")?,
+        None => reader.version(),
     };
     let tol = tolerance(
         q.tolerance,
@@ -270,16 +272,35 @@ pub async fn mpcdi_package(
     let (bytes, worst) = run_job(&s, move |cancel| {
         let mut regions = Vec::new();
         let mut worst = 0.0f64;
+        // A 2d buffer is a canvas the media server plays: channels with the same canvas share
+        // one, each other canvas gets its own.
+        let mut canvases: Vec<(String, [u32; 2])> = Vec::new();
         for (id, j) in jobs {
+            let key = serde_json::to_string(&j.canvas).unwrap_or_default();
             let o = owned(j, &id)?;
-            let (region, err) = o.sources(cancel).region(profile, tol, alpha_bits)?;
+            let (mut region, err) = o.sources(cancel).region(profile, tol, alpha_bits, reader)?;
+            region.buffer = canvases
+                .iter()
+                .position(|(k, _)| *k == key)
+                .unwrap_or_else(|| {
+                    canvases.push((key, o.content_size));
+                    canvases.len() - 1
+                });
             worst = worst.max(err);
             regions.push(region);
         }
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_secs());
-        Ok((mpcdi::package(version, profile, &regions, now)?, worst))
+        let buffers = match profile {
+            Profile::TwoD => canvases.into_iter().map(|(_, size)| size).collect(),
+            Profile::A3 => mpcdi::side_by_side(&mut regions),
+        };
+        let header = mpcdi::Header {
+            version,
+            profile,
+            reader,
+            buffers,
+            unix_time: mpcdi::unix_now(),
+        };
+        Ok((mpcdi::package(&header, &regions)?, worst))
     })
     .await
     .map_err(unmet)?;
