@@ -529,6 +529,14 @@ async fn channel_exports_parse_back_and_report_their_grid() {
         (st, json(&body)["field"].as_str()),
         (StatusCode::BAD_REQUEST, Some("tolerance"))
     );
+    for bad in ["mesh.data?reader=blender", "warp-2d.pfm?reader=celestia"] {
+        let (st, _, body) = call(&s, get(&format!("/v1/channels/left/exports/{bad}"))).await;
+        assert_eq!(
+            (st, json(&body)["field"].as_str()),
+            (StatusCode::BAD_REQUEST, Some("reader")),
+            "{bad}"
+        );
+    }
 }
 
 #[tokio::test]
@@ -1367,4 +1375,242 @@ async fn bourke_meshes_give_lit_pixels_their_weight_at_the_wall_edge() {
     );
     // Measured: 3,397 of 210,588 (the blend ramps inside those cells); 159,411 before.
     assert!(dark * 20 < lit, "{dark} of {lit} lit pixels darkened");
+}
+
+/// Bilinear between nodes placed edge to edge (node i at i / (n − 1)), as the 2d PFM, Bourke and
+/// VESA readers interpolate; `None` where a weighted node is unknown.
+fn edge_to_edge(
+    nodes: &[Option<[f64; 2]>],
+    n: [usize; 2],
+    size: [usize; 2],
+    i: usize,
+    j: usize,
+) -> Option<[f64; 2]> {
+    let at = |p: usize, n: usize, size: usize| (p as f64 + 0.5) / size as f64 * (n - 1) as f64;
+    let (gx, gy) = (at(i, n[0], size[0]), at(j, n[1], size[1]));
+    let (x0, y0) = ((gx as usize).min(n[0] - 2), (gy as usize).min(n[1] - 2));
+    let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+    let mut out = [0.0; 2];
+    for (x, y, wt) in [
+        (x0, y0, (1.0 - fx) * (1.0 - fy)),
+        (x0 + 1, y0, fx * (1.0 - fy)),
+        (x0, y0 + 1, (1.0 - fx) * fy),
+        (x0 + 1, y0 + 1, fx * fy),
+    ] {
+        if wt > 0.0 {
+            let v = nodes[y * n[0] + x]?;
+            out[0] += wt * v[0];
+            out[1] += wt * v[1];
+        }
+    }
+    Some(out)
+}
+
+/// A Bourke mesh read as Celestia (`WarpMesh::mapVertex`) or SGCT (`paulbourke.cpp`'s index
+/// list) reads it, in the file's own frame (x across, y up, rows bottom first): the point's
+/// cell, then the triangle it falls in. Content (u, v) with v down; `None` off drawn nodes.
+fn triangle_reader(
+    mesh: &bourke::Mesh,
+    reader: &str,
+    size: [usize; 2],
+    i: usize,
+    j: usize,
+) -> Option<[f64; 2]> {
+    let aspect = size[0] as f64 / size[1] as f64;
+    let x = ((i as f64 + 0.5) / size[0] as f64 * 2.0 - 1.0) * aspect;
+    let y = 1.0 - (j as f64 + 0.5) / size[1] as f64 * 2.0;
+    let (nx, ny) = (mesh.nx, mesh.ny);
+    let loc_x = (x + aspect) / (2.0 * aspect) * (nx - 1) as f64;
+    let loc_y = (y + 1.0) / 2.0 * (ny - 1) as f64;
+    let (cx, cy) = ((loc_x as usize).min(nx - 2), (loc_y as usize).min(ny - 2));
+    let (fx, fy) = (loc_x - cx as f64, loc_y - cy as f64);
+    let node = |c: usize, r: usize| {
+        let n = mesh.nodes[r * nx + c];
+        (n[4] >= 0.0).then_some([n[2], n[3]])
+    };
+    let (p1, p2, p3, p4) = (
+        node(cx, cy),
+        node(cx + 1, cy),
+        node(cx, cy + 1),
+        node(cx + 1, cy + 1),
+    );
+    let mix = |a: [f64; 2], s: f64, b: [f64; 2], t: f64, c: [f64; 2]| {
+        [0, 1].map(|k| a[k] + s * (b[k] - a[k]) + t * (c[k] - a[k]))
+    };
+    let [u, v] = match reader {
+        // Celestia: p1 p2 p3 below the diagonal p2–p3, else p4 p3 p2.
+        "celestia" if fx + fy <= 1.0 => mix(p1?, fx, p2?, fy, p3?),
+        "celestia" => mix(p4?, 1.0 - fx, p3?, 1.0 - fy, p2?),
+        // SGCT: triangles (i0, i1, i2) and (i0, i2, i3) around the diagonal i0–i2.
+        "sgct" if fx >= fy => {
+            let (a, b, c) = (p1?, p2?, p4?);
+            [0, 1].map(|k| a[k] + fx * (b[k] - a[k]) + fy * (c[k] - b[k]))
+        }
+        "sgct" => {
+            let (a, d, c) = (p1?, p3?, p4?);
+            [0, 1].map(|k| a[k] + fy * (d[k] - a[k]) + fx * (c[k] - d[k]))
+        }
+        other => panic!("{other}"),
+    };
+    Some([u, 1.0 - v])
+}
+
+/// Issue 20, item 5: a tolerance is a promise. Read back as their readers interpolate them, the
+/// 2d PFM, the Bourke mesh and the MPCDI region of the demo rig's centre channel stay within the
+/// tolerance asked for, in content pixels, over every pixel that shows the canvas: on the exact
+/// warp and after the README's tile edit (where a grid search once gave up and answered a
+/// full-resolution file).
+#[tokio::test]
+async fn exports_keep_their_tolerance_on_an_exact_and_a_tile_edited_channel() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let patch = readme
+        .split("-d '{\"edits\": ")
+        .nth(1)
+        .and_then(|rest| rest.split("}'").next())
+        .expect("the README's PATCH");
+    let demo = state_with(
+        None,
+        None,
+        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+    );
+    let (_, _, body) = call(&demo, get("/v1/channels/centre/content")).await;
+    let canvas: omniwarp::server::Canvas =
+        serde_json::from_value(json(&body)["content"].clone()).unwrap();
+    let view = canvas.view().unwrap();
+    let [cw, ch] = canvas.size.map(f64::from);
+    let dir = tempfile::tempdir().unwrap();
+    for edited in [false, true] {
+        if edited {
+            let body = format!("{{\"edits\": {patch}}}");
+            let (st, _, reply) = call(
+                &demo,
+                write("PATCH", "/v1/channels/centre/tiles", Some(1), body),
+            )
+            .await;
+            assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&reply));
+        }
+        let (_, _, exr) = call(&demo, get("/v1/channels/centre/warp.exr")).await;
+        std::fs::write(dir.path().join("w.exr"), &exr).unwrap();
+        let warp = omniwarp::normalmap::NormalMap::read(&dir.path().join("w.exr")).unwrap();
+        let size = [warp.width(), warp.height()];
+        let exact = omniwarp::export::content_uv(&warp, &view);
+        let shown = exact.iter().filter(|p| p.is_some()).count();
+        assert!(
+            shown * 2 > size[0] * size[1],
+            "{shown} pixels show the canvas"
+        );
+        // The largest distance, content pixels, between what a reader shows and the exact warp.
+        let worst = |read: &dyn Fn(usize, usize) -> Option<[f64; 2]>| {
+            let mut worst = 0.0f64;
+            for j in 0..size[1] {
+                for i in 0..size[0] {
+                    if let Some(e) = exact[j * size[0] + i] {
+                        worst = worst.max(read(i, j).map_or(f64::INFINITY, |g| {
+                            ((g[0] - e[0]) * cw).hypot((g[1] - e[1]) * ch)
+                        }));
+                    }
+                }
+            }
+            worst
+        };
+        for tol in [0.5, 2.0] {
+            let (st, h, body) = call(
+                &demo,
+                get(&format!(
+                    "/v1/channels/centre/exports/warp-2d.pfm?tolerance={tol}"
+                )),
+            )
+            .await;
+            assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+            let (nx, ny, rows) = parse_pfm(&body, "2d").unwrap();
+            let nodes: Vec<_> = rows
+                .iter()
+                .map(|r| {
+                    r[0].is_finite()
+                        .then_some([f64::from(r[0]), f64::from(r[1])])
+                })
+                .collect();
+            let pfm = worst(&|i, j| edge_to_edge(&nodes, [nx, ny], size, i, j));
+            let reported: f64 = h["x-omniwarp-max-error"].to_str().unwrap().parse().unwrap();
+
+            let (st, _, body) = call(
+                &demo,
+                get(&format!(
+                    "/v1/channels/centre/exports/mesh.data?tolerance={tol}"
+                )),
+            )
+            .await;
+            assert_eq!(st, StatusCode::OK);
+            let mesh = bourke::read_mesh(std::str::from_utf8(&body).unwrap()).unwrap();
+            // Bottom row first, v up; a node that is not drawn (i < 0) covers nothing.
+            let nodes: Vec<_> = (0..mesh.nx * mesh.ny)
+                .map(|n| {
+                    let node = mesh.nodes[(mesh.ny - 1 - n / mesh.nx) * mesh.nx + n % mesh.nx];
+                    (node[4] >= 0.0).then_some([node[2], 1.0 - node[3]])
+                })
+                .collect();
+            let bourke = worst(&|i, j| edge_to_edge(&nodes, [mesh.nx, mesh.ny], size, i, j));
+            // The default mesh holds the tolerance in triangle readers too, and one made for a
+            // reader holds it there.
+            let mut triangles = Vec::new();
+            for (query, reader) in [
+                ("", "celestia"),
+                ("", "sgct"),
+                ("&reader=celestia", "celestia"),
+                ("&reader=sgct", "sgct"),
+            ] {
+                let (st, _, body) = call(
+                    &demo,
+                    get(&format!(
+                        "/v1/channels/centre/exports/mesh.data?tolerance={tol}{query}"
+                    )),
+                )
+                .await;
+                assert_eq!(st, StatusCode::OK);
+                let m = bourke::read_mesh(std::str::from_utf8(&body).unwrap()).unwrap();
+                let e = worst(&|i, j| triangle_reader(&m, reader, size, i, j));
+                triangles.push((query, reader, e, m.nx));
+                assert!(
+                    e <= tol + 1e-3,
+                    "edited {edited}, mesh{query} in {reader}: {e}"
+                );
+            }
+            eprintln!("  triangle readers: {triangles:?}");
+
+            let (st, _, body) =
+                call(&demo, get(&format!("/v1/export.mpcdi?tolerance={tol}"))).await;
+            assert_eq!(st, StatusCode::OK);
+            let pkg = mpcdi::read(&body).unwrap();
+            let region = pkg.buffers[0]
+                .regions
+                .iter()
+                .find(|r| r.id == "centre")
+                .unwrap();
+            let [x, y, xs, ys] = region.rect;
+            let (gx, gy, rows) = &region.warp;
+            let nodes: Vec<_> = rows
+                .iter()
+                .map(|r| {
+                    r[0].is_finite()
+                        .then_some([x + f64::from(r[0]) * xs, y + f64::from(r[1]) * ys])
+                })
+                .collect();
+            let vesa = worst(&|i, j| edge_to_edge(&nodes, [*gx, *gy], size, i, j));
+            eprintln!(
+                "edited {edited}, tolerance {tol}: pfm {pfm:.3} ({nx}×{ny}, reported {reported:.3}), \
+                 bourke {bourke:.3} ({}×{}), mpcdi {vesa:.3} ({gx}×{gy})",
+                mesh.nx, mesh.ny
+            );
+            // f32 samples and the text's 8 decimals add well under a thousandth of a pixel.
+            for (what, e) in [("pfm", pfm), ("bourke", bourke), ("mpcdi", vesa)] {
+                assert!(e <= tol + 1e-3, "edited {edited}, {what}: {e} > {tol}");
+            }
+            assert!(
+                (pfm - reported).abs() < 1e-2 || pfm < reported,
+                "{pfm} vs {reported}"
+            );
+            assert!(nx < size[0] / 4, "{nx} columns: no full-resolution file");
+        }
+    }
 }

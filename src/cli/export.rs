@@ -55,18 +55,23 @@ pub struct ExportArgs {
     /// one the --reader takes (2.0 but for watchout).
     #[arg(long, value_parser = ["1.0", "2.0"])]
     mpcdi_version: Option<String>,
-    /// Whose conventions an MPCDI 2d package follows (region y and v direction, PFM row order,
-    /// node placement; docs/mpcdi.md): vesa (the reference library, nDisplay and the media
-    /// servers built on it), ndisplay, watchout, pympcdi or sgct.
-    #[arg(long, default_value = "vesa", value_parser = ["vesa", "ndisplay", "watchout", "pympcdi", "sgct"])]
-    reader: String,
+    /// The reader the export is made for. MPCDI 2d: whose conventions it follows (region y and
+    /// v direction, PFM row order, node placement; docs/mpcdi.md): vesa (the default: the
+    /// reference library and the media servers built on it), ndisplay, watchout, pympcdi or
+    /// sgct. Mesh: how its cells are filled, which sizes the grid: any (the default: every
+    /// way), bilinear, celestia or sgct.
+    #[arg(long)]
+    reader: Option<String>,
     /// Bits of the MPCDI alpha maps: 8 (what readers decode) or 16.
     #[arg(long, default_value = "8", value_parser = ["8", "16"])]
     alpha_bits: String,
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
-    use omniwarp::export::{self, channel::Sources, channel::Tolerance, mpcdi};
+    use omniwarp::export::{self, bourke::MeshReader, channel::Sources, channel::Tolerance, mpcdi};
+    if a.reader.is_some() && !matches!(a.format, ExportFormat::Mpcdi | ExportFormat::Mesh) {
+        anyhow::bail!("--reader: only MPCDI 2d packages and meshes are made for a reader");
+    }
     // The command line waits for its export; nothing cancels it.
     let never = std::sync::atomic::AtomicBool::new(false);
     let rig = read_rig(&a.rig)?;
@@ -96,7 +101,10 @@ pub fn run(a: ExportArgs) -> Result<()> {
             mpcdi::Profile::TwoD => Some(a.canvas.view(cw, chh)?),
             mpcdi::Profile::A3 => None,
         };
-        let reader = mpcdi::Reader::parse(&a.reader, "--reader")?;
+        let reader = match &a.reader {
+            Some(r) => mpcdi::Reader::parse(r, "--reader")?,
+            None => mpcdi::Reader::Vesa,
+        };
         let mut regions = Vec::new();
         for ch in &rig.channels {
             let warp = rig.warp(ch);
@@ -181,7 +189,11 @@ pub fn run(a: ExportArgs) -> Result<()> {
             };
             let tol = tolerance(0.5)?;
             if let ExportFormat::Mesh = a.format {
-                let (text, c) = src.bourke(tol)?;
+                let reader = match &a.reader {
+                    Some(r) => MeshReader::parse(r, "--reader")?,
+                    None => MeshReader::Any,
+                };
+                let (text, c) = src.bourke(tol, reader)?;
                 eprintln!(
                     "{}×{} mesh, worst error {:.4} px",
                     c.grid.columns, c.grid.rows, c.max_error

@@ -5,8 +5,62 @@
 //! at its bottom (OpenGL texture coordinates); i is the node's intensity (the blend weight),
 //! negative where the node is not drawn.
 
-use super::grid::Grid;
+use super::grid::{Cells, Grid};
 use crate::error::{Error, Result};
+
+/// The reader a mesh's grid is sized for: each draws a cell as two triangles, split along a
+/// diagonal of its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MeshReader {
+    /// Whichever way a reader splits the cells (and bilinear): the default, since a mesh
+    /// usually goes to more than one player.
+    Any,
+    /// A reader that interpolates bilinearly.
+    Bilinear,
+    /// Celestia (`WarpMesh`): triangles sharing the cell's top-left to bottom-right diagonal.
+    Celestia,
+    /// SGCT/OpenSpace (`correction/paulbourke.cpp`): the bottom-left to top-right diagonal.
+    Sgct,
+}
+
+impl MeshReader {
+    pub const ALL: [MeshReader; 4] = [
+        MeshReader::Any,
+        MeshReader::Bilinear,
+        MeshReader::Celestia,
+        MeshReader::Sgct,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshReader::Any => "any",
+            MeshReader::Bilinear => "bilinear",
+            MeshReader::Celestia => "celestia",
+            MeshReader::Sgct => "sgct",
+        }
+    }
+
+    pub fn parse(s: &str, field: &str) -> Result<Self> {
+        MeshReader::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| {
+                Error::invalid(
+                    field,
+                    format!("a mesh is read by any, bilinear, celestia or sgct, got `{s}`"),
+                )
+            })
+    }
+
+    pub fn cells(self) -> Cells {
+        match self {
+            MeshReader::Any => Cells::Any,
+            MeshReader::Bilinear => Cells::Bilinear,
+            MeshReader::Celestia => Cells::TopLeftDiagonal,
+            MeshReader::Sgct => Cells::BottomLeftDiagonal,
+        }
+    }
+}
 use std::fmt::Write as _;
 
 /// A mesh as read back.

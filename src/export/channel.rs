@@ -3,7 +3,8 @@
 //! from them. Shared by the CLI and the daemon.
 
 use super::bourke;
-use super::grid::{self, Chosen, Layout};
+use super::bourke::MeshReader;
+use super::grid::{self, Chosen, Layout, Reading};
 use super::mpcdi::{self, Profile, Reader, Region};
 use crate::error::{Error, Result};
 use crate::rig::{BlendOptions, blend_png_bytes};
@@ -84,7 +85,7 @@ impl Sources<'_> {
     /// Content (x, y) grid of the 2d meaning: B = NaN (no error estimate), NaN where unknown;
     /// samples past the canvas edge keep their (outside [0, 1]) coordinates, alpha hides them.
     pub fn grid_2d(&self, tol: Tolerance) -> Result<(Chosen<2>, Vec<[f32; 3]>)> {
-        let c = self.choose_2d(self.uv, self.uv_scale(), Layout::Edges, tol)?;
+        let c = self.choose_2d(self.uv, self.uv_scale(), Reading::BILINEAR, tol)?;
         let rows = rows_2d(&c);
         Ok((c, rows))
     }
@@ -93,7 +94,7 @@ impl Sources<'_> {
         &self,
         field: &[Option<[f64; 2]>],
         scale: [f64; 2],
-        layout: Layout,
+        reading: Reading,
         tol: Tolerance,
     ) -> Result<Chosen<2>> {
         let c = grid::choose(
@@ -102,7 +103,7 @@ impl Sources<'_> {
             self.height,
             tol.0,
             scale,
-            layout,
+            reading,
             self.cancel,
         )?;
         tol.met(c, "tolerance")
@@ -160,7 +161,7 @@ impl Sources<'_> {
             })
             .collect();
         let [sx, sy] = self.uv_scale();
-        let c = self.choose_2d(&field, [sx * w, sy * h], reader.layout(), tol)?;
+        let c = self.choose_2d(&field, [sx * w, sy * h], reader.reading(), tol)?;
         let rows = rows_2d(&c);
         Ok((c, rows))
     }
@@ -173,7 +174,7 @@ impl Sources<'_> {
             self.height,
             tol.0,
             [1000.0; 3],
-            Layout::Edges,
+            Reading::BILINEAR,
             self.cancel,
         )?;
         let c = tol.met(c, "tolerance")?;
@@ -251,13 +252,19 @@ impl Sources<'_> {
         ))
     }
 
-    /// Paul Bourke mesh text with its grid, intensity = blend weight. Readers interpolate the
+    /// Paul Bourke mesh text with its grid, sized for how `reader` fills a cell (every reader
+    /// of this format draws triangles; which diagonal varies), intensity = blend weight.
+    /// Readers interpolate the
     /// intensity across each cell, so a node just off the wall, which a cell reaching the wall
     /// draws, takes the weight of the lit pixel nearest it (within a cell) rather than the 0 of
     /// an unlit pixel, which would darken the lit part of the cell. Held, not extrapolated: a
     /// weight's gradient carried over a whole cell overshoots to 0 or past 1.
-    pub fn bourke(&self, tol: Tolerance) -> Result<(String, Chosen<2>)> {
-        let c = self.choose_2d(self.uv, self.uv_scale(), Layout::Edges, tol)?;
+    pub fn bourke(&self, tol: Tolerance, reader: MeshReader) -> Result<(String, Chosen<2>)> {
+        let reading = Reading {
+            layout: Layout::Edges,
+            cells: reader.cells(),
+        };
+        let c = self.choose_2d(self.uv, self.uv_scale(), reading, tol)?;
         let (w, h) = (self.width, self.height);
         let (nx, ny) = (c.grid.columns, c.grid.rows);
         let reach = |size: usize, n: usize| (size as f64 / (n.max(2) - 1) as f64).ceil() as i64;

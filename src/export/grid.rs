@@ -50,18 +50,50 @@ impl Layout {
     }
 }
 
+/// How a reader fills a cell between its four nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cells {
+    /// Bilinearly (a texture sampler, most warp players).
+    Bilinear,
+    /// Two triangles sharing the diagonal from the cell's top-left node to its bottom-right one
+    /// (image rows top to bottom): Celestia's warp mesh.
+    TopLeftDiagonal,
+    /// Two triangles sharing the diagonal from the bottom-left node to the top-right one: SGCT's
+    /// Paul Bourke mesh.
+    BottomLeftDiagonal,
+    /// Any of the three: the error is the worst of them, so the grid holds its tolerance
+    /// whichever way the reader splits a cell (a reader not named, or one that alternates).
+    Any,
+}
+
+/// How a reader reads a grid: where it places the nodes and how it fills the cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reading {
+    pub layout: Layout,
+    pub cells: Cells,
+}
+
+impl Reading {
+    /// Nodes edge to edge, cells bilinear.
+    pub const BILINEAR: Reading = Reading {
+        layout: Layout::Edges,
+        cells: Cells::Bilinear,
+    };
+}
+
 /// A uniform grid of samples, row-major from the top row; `None` where the field has none.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid<const N: usize> {
     pub columns: usize,
     pub rows: usize,
-    pub layout: Layout,
+    pub reading: Reading,
     pub samples: Vec<Option<[f64; N]>>,
 }
 
-/// Bilinear weights and the four corner indices around fractional index (gx, gy) of a
-/// columns × rows lattice, clamped to it.
-fn corners(gx: f64, gy: f64, columns: usize, rows: usize) -> ([usize; 4], [f64; 4]) {
+/// The four corner indices around fractional index (gx, gy) of a columns × rows lattice,
+/// clamped to it, and their weights as `cells` fills the cell (one is 0 for a triangle;
+/// [`Cells::Any`] is taken as bilinear here, see [`Grid::max_error`]).
+fn corners(gx: f64, gy: f64, columns: usize, rows: usize, cells: Cells) -> ([usize; 4], [f64; 4]) {
     let gx = gx.clamp(0.0, (columns - 1) as f64);
     let gy = gy.clamp(0.0, (rows - 1) as f64);
     let (x0, y0) = (
@@ -70,6 +102,19 @@ fn corners(gx: f64, gy: f64, columns: usize, rows: usize) -> ([usize; 4], [f64; 
     );
     let (x1, y1) = ((x0 + 1).min(columns - 1), (y0 + 1).min(rows - 1));
     let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+    // Weights of the top-left, top-right, bottom-left and bottom-right nodes.
+    let weights = match cells {
+        Cells::Bilinear | Cells::Any => [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ],
+        Cells::TopLeftDiagonal if fx >= fy => [1.0 - fx, fx - fy, 0.0, fy],
+        Cells::TopLeftDiagonal => [1.0 - fy, 0.0, fy - fx, fx],
+        Cells::BottomLeftDiagonal if fx + fy <= 1.0 => [1.0 - fx - fy, fx, fy, 0.0],
+        Cells::BottomLeftDiagonal => [0.0, 1.0 - fy, 1.0 - fx, fx + fy - 1.0],
+    };
     (
         [
             y0 * columns + x0,
@@ -77,25 +122,21 @@ fn corners(gx: f64, gy: f64, columns: usize, rows: usize) -> ([usize; 4], [f64; 
             y1 * columns + x0,
             y1 * columns + x1,
         ],
-        [
-            (1.0 - fx) * (1.0 - fy),
-            fx * (1.0 - fy),
-            (1.0 - fx) * fy,
-            fx * fy,
-        ],
+        weights,
     )
 }
 
-/// Bilinear interpolation of `values` (a columns × rows lattice) at (gx, gy); `None` when a
-/// corner that carries weight has no value — a reader would blend into an invalid sample there.
+/// Interpolation of `values` (a columns × rows lattice) at (gx, gy), filling cells as `cells`
+/// says; `None` when a corner that carries weight has no value — a reader would blend into an
+/// invalid sample there.
 fn interpolate<const N: usize>(
     values: &[Option<[f64; N]>],
     columns: usize,
     rows: usize,
-    gx: f64,
-    gy: f64,
+    (gx, gy): (f64, f64),
+    cells: Cells,
 ) -> Option<[f64; N]> {
-    let (idx, wt) = corners(gx, gy, columns, rows);
+    let (idx, wt) = corners(gx, gy, columns, rows, cells);
     let mut out = [0.0; N];
     for (i, w) in idx.into_iter().zip(wt) {
         if w == 0.0 {
@@ -122,8 +163,9 @@ pub fn sample<const N: usize>(
     height: usize,
     columns: usize,
     rows: usize,
-    layout: Layout,
+    reading: Reading,
 ) -> Grid<N> {
+    let layout = reading.layout;
     let reach_x = (width as f64 / (columns.max(2) - 1) as f64).ceil() as isize;
     let reach_y = (height as f64 / (rows.max(2) - 1) as f64).ceil() as isize;
     let samples = (0..columns * rows)
@@ -136,7 +178,7 @@ pub fn sample<const N: usize>(
             let within =
                 (0.0..=(width - 1) as f64).contains(&x) && (0.0..=(height - 1) as f64).contains(&y);
             within
-                .then(|| interpolate(field, width, height, x, y))
+                .then(|| interpolate(field, width, height, (x, y), Cells::Bilinear))
                 .flatten()
                 .or_else(|| nearest_valid(field, width, height, x, y, reach_x, reach_y))
         })
@@ -144,7 +186,7 @@ pub fn sample<const N: usize>(
     Grid {
         columns,
         rows,
-        layout,
+        reading,
         samples,
     }
 }
@@ -203,16 +245,25 @@ fn nearest_valid<const N: usize>(
 }
 
 impl<const N: usize> Grid<N> {
-    /// What a reader interpolating this grid shows at pixel (i, j).
-    pub fn at_pixel(&self, i: usize, j: usize, width: usize, height: usize) -> Option<[f64; N]> {
-        let gx = self.layout.index(i as f64, self.columns, width);
-        let gy = self.layout.index(j as f64, self.rows, height);
-        interpolate(&self.samples, self.columns, self.rows, gx, gy)
+    /// What a reader filling cells as `cells` says shows at pixel (i, j).
+    pub fn at_pixel(
+        &self,
+        i: usize,
+        j: usize,
+        width: usize,
+        height: usize,
+        cells: Cells,
+    ) -> Option<[f64; N]> {
+        let layout = self.reading.layout;
+        let gx = layout.index(i as f64, self.columns, width);
+        let gy = layout.index(j as f64, self.rows, height);
+        interpolate(&self.samples, self.columns, self.rows, (gx, gy), cells)
     }
 
-    /// Largest distance between what a reader interpolates and the field over the field's valid
-    /// pixels (infinite if the grid leaves one uncovered); components are multiplied by `scale`
-    /// first (content pixels per unit, millimetres per metre).
+    /// Largest distance between what the grid's reader interpolates and the field over the
+    /// field's valid pixels (infinite if the grid leaves one uncovered); components are
+    /// multiplied by `scale` first (content pixels per unit, millimetres per metre). For
+    /// [`Cells::Any`], the worst of the three ways to fill a cell.
     pub fn max_error(
         &self,
         field: &[Option<[f64; N]>],
@@ -220,6 +271,14 @@ impl<const N: usize> Grid<N> {
         height: usize,
         scale: [f64; N],
     ) -> f64 {
+        let ways: &[Cells] = match self.reading.cells {
+            Cells::Any => &[
+                Cells::Bilinear,
+                Cells::TopLeftDiagonal,
+                Cells::BottomLeftDiagonal,
+            ],
+            one => &[one],
+        };
         (0..height)
             .into_par_iter()
             .map(|j| {
@@ -228,13 +287,15 @@ impl<const N: usize> Grid<N> {
                     let Some(exact) = field[j * width + i] else {
                         continue;
                     };
-                    let Some(got) = self.at_pixel(i, j, width, height) else {
-                        return f64::INFINITY;
-                    };
-                    let d2: f64 = (0..N)
-                        .map(|c| ((got[c] - exact[c]) * scale[c]).powi(2))
-                        .sum();
-                    worst = worst.max(d2.sqrt());
+                    for cells in ways {
+                        let Some(got) = self.at_pixel(i, j, width, height, *cells) else {
+                            return f64::INFINITY;
+                        };
+                        let d2: f64 = (0..N)
+                            .map(|c| ((got[c] - exact[c]) * scale[c]).powi(2))
+                            .sum();
+                        worst = worst.max(d2.sqrt());
+                    }
                 }
                 worst
             })
@@ -250,7 +311,7 @@ pub struct Chosen<const N: usize> {
 }
 
 /// The coarsest grid (columns growing by about √2 per step, rows keeping the image's aspect)
-/// whose worst interpolation error is within `tolerance`, its samples placed as `layout` says;
+/// whose worst interpolation error, as `reading` says a reader reads it, is within `tolerance`;
 /// the exact grid ([`Layout::exact`]) when none is. Grids stop at [`crate::limits::EXPORT_NODES`]: the finest grid tried is returned, and
 /// the caller compares its `max_error` with the tolerance. [`Error::Cancelled`] once `cancel`
 /// is set.
@@ -262,7 +323,7 @@ pub fn choose<const N: usize>(
     height: usize,
     tolerance: f64,
     scale: [f64; N],
-    layout: Layout,
+    reading: Reading,
     cancel: &AtomicBool,
 ) -> crate::Result<Chosen<N>> {
     let fits = |c: usize, r: usize| {
@@ -273,7 +334,7 @@ pub fn choose<const N: usize>(
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled);
         }
-        let grid = sample(field, width, height, columns, rows, layout);
+        let grid = sample(field, width, height, columns, rows, reading);
         let max_error = grid.max_error(field, width, height, scale);
         Ok(Chosen { grid, max_error })
     };
@@ -291,7 +352,7 @@ pub fn choose<const N: usize>(
         finest = Some(c);
         columns = ((columns as f64 * std::f64::consts::SQRT_2).ceil() as usize).max(columns + 1);
     }
-    let (columns, rows) = layout.exact(width, height);
+    let (columns, rows) = reading.layout.exact(width, height);
     match finest {
         Some(c) if !fits(columns, rows) => Ok(c),
         _ => try_grid(columns, rows),
@@ -315,51 +376,88 @@ mod tests {
 
     /// A reader written independently: normalised position u = (p + ½) / size, sample index
     /// u · (n − 1) (edges) or u · n − ½ clamped to the grid, as a texture sampler clamps to its
-    /// edge (centres), bilinear between samples.
-    fn read(g: &Grid<2>, w: usize, h: usize, i: usize, j: usize) -> Option<[f64; 2]> {
+    /// edge (centres); within a cell bilinear, or along the two edges of the triangle the point
+    /// falls in.
+    fn read(g: &Grid<2>, cells: Cells, w: usize, h: usize, i: usize, j: usize) -> Option<[f64; 2]> {
         let to = |p: f64, n: usize, size: usize| {
             let u = (p + 0.5) / size as f64;
-            match g.layout {
+            match g.reading.layout {
                 Layout::Edges => u * (n - 1) as f64,
                 Layout::Centres => (u * n as f64 - 0.5).clamp(0.0, (n - 1) as f64),
             }
         };
         let (gx, gy) = (to(i as f64, g.columns, w), to(j as f64, g.rows, h));
-        let (x0, y0) = (gx.floor() as usize, gy.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(g.columns - 1), (y0 + 1).min(g.rows - 1));
+        let (x0, y0) = (
+            (gx.floor() as usize).min(g.columns - 2),
+            (gy.floor() as usize).min(g.rows - 2),
+        );
         let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
-        let mut out = [0.0; 2];
-        for (x, y, wt) in [
-            (x0, y0, (1.0 - fx) * (1.0 - fy)),
-            (x1, y0, fx * (1.0 - fy)),
-            (x0, y1, (1.0 - fx) * fy),
-            (x1, y1, fx * fy),
-        ] {
-            if wt > 0.0 {
-                let v = g.samples[y * g.columns + x]?;
-                out[0] += wt * v[0];
-                out[1] += wt * v[1];
+        let at = |x: usize, y: usize| g.samples[y * g.columns + x];
+        let (tl, tr, bl, br) = (
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        );
+        // a + s·(b − a) + t·(c − d), componentwise.
+        let walk = |a: [f64; 2], s: f64, b: [f64; 2], t: f64, c: [f64; 2], d: [f64; 2]| {
+            [0, 1].map(|k| a[k] + s * (b[k] - a[k]) + t * (c[k] - d[k]))
+        };
+        Some(match cells {
+            Cells::Bilinear | Cells::Any => {
+                let (tl, tr, bl, br) = (tl?, tr?, bl?, br?);
+                let top = walk(tl, fx, tr, 0.0, tl, tl);
+                let bottom = walk(bl, fx, br, 0.0, bl, bl);
+                walk(top, fy, bottom, 0.0, top, top)
             }
-        }
-        Some(out)
+            Cells::TopLeftDiagonal if fx >= fy => walk(tl?, fx, tr?, fy, br?, tr?),
+            Cells::TopLeftDiagonal => walk(tl?, fy, bl?, fx, br?, bl?),
+            Cells::BottomLeftDiagonal if fx + fy <= 1.0 => walk(tl?, fx, tr?, fy, bl?, tl?),
+            Cells::BottomLeftDiagonal => walk(br?, 1.0 - fx, bl?, 1.0 - fy, tr?, br?),
+        })
     }
 
     #[test]
     fn chosen_grids_meet_the_tolerance_as_an_independent_reader_sees_them() {
         let (w, h) = (160, 90);
         let f = field(w, h);
-        for layout in [Layout::Edges, Layout::Centres] {
+        let cells = [
+            Cells::Bilinear,
+            Cells::TopLeftDiagonal,
+            Cells::BottomLeftDiagonal,
+            Cells::Any,
+        ];
+        let readings = cells
+            .map(|cells| Reading {
+                layout: Layout::Edges,
+                cells,
+            })
+            .into_iter()
+            .chain([Reading {
+                layout: Layout::Centres,
+                cells: Cells::Bilinear,
+            }]);
+        let mut coarsest = Vec::new();
+        for reading in readings {
+            let layout = reading.layout;
             let mut columns = Vec::new();
             for tol in [0.05, 0.2, 1.0] {
-                let c = choose(&f, w, h, tol, [1.0, 1.0], layout, &AtomicBool::new(false)).unwrap();
-                assert_eq!(c.grid.layout, layout);
+                let never = AtomicBool::new(false);
+                let c = choose(&f, w, h, tol, [1.0, 1.0], reading, &never).unwrap();
+                assert_eq!(c.grid.reading, reading);
                 assert!(c.max_error <= tol, "{tol}: {}", c.max_error);
                 let mut worst = 0.0f64;
+                let ways: &[Cells] = match reading.cells {
+                    Cells::Any => &cells[..3],
+                    _ => std::slice::from_ref(&reading.cells),
+                };
                 for j in 0..h {
                     for i in 0..w {
                         if let Some(e) = f[j * w + i] {
-                            let got = read(&c.grid, w, h, i, j).expect("every valid pixel covered");
-                            worst = worst.max((got[0] - e[0]).hypot(got[1] - e[1]));
+                            for &way in ways {
+                                let got = read(&c.grid, way, w, h, i, j).expect("covered");
+                                worst = worst.max((got[0] - e[0]).hypot(got[1] - e[1]));
+                            }
                         }
                     }
                 }
@@ -368,13 +466,22 @@ mod tests {
                     "{tol}: {worst} vs {}",
                     c.max_error
                 );
-                assert!(c.grid.columns < w / 2, "{tol}: {} columns", c.grid.columns);
                 columns.push(c.grid.columns);
             }
-            assert!(
-                columns.windows(2).all(|p| p[1] < p[0]),
-                "{layout:?}: {columns:?}"
-            );
+            // Nodes at cell centres leave the outer half cell clamped, where this field's
+            // slope of 3 allows no more than a third of a pixel: those grids are near exact.
+            // Edge-to-edge grids follow the tolerance down.
+            let coarser = |p: &[usize]| match layout {
+                Layout::Edges => p[1] < p[0] && p[0] < w / 2,
+                Layout::Centres => p[1] <= p[0],
+            };
+            assert!(columns.windows(2).all(coarser), "{reading:?}: {columns:?}");
+            coarsest.push(columns[2]);
         }
+        // Holding the tolerance for any reader costs at least what the hardest one needs.
+        assert!(
+            coarsest[3] >= coarsest[..3].iter().copied().max().unwrap(),
+            "{coarsest:?}"
+        );
     }
 }

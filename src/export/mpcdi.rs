@@ -15,7 +15,7 @@
 //! `Xresolution`, `Yresolution`, `xsize`, `ysize`, `originof3DData`, and `level` is written in
 //! v2.0 files too. The reader here accepts any letter case.
 
-use super::grid::Layout;
+use super::grid::{Cells, Layout, Reading};
 use crate::error::{Error, Result};
 use std::io::{Cursor, Read, Write};
 
@@ -118,10 +118,21 @@ impl Reader {
         matches!(self, Reader::Pympcdi | Reader::Sgct)
     }
 
-    pub fn layout(self) -> Layout {
+    /// Where the reader places nodes and how it fills a cell. The VESA text says `linear`;
+    /// PyMPCDI samples a texture; nDisplay and SGCT build triangle meshes (SGCT's strips
+    /// alternate the diagonal row by row, nDisplay's is not documented) and WATCHOUT's reading is
+    /// not published: for those the grid holds its tolerance however a cell is split.
+    pub fn reading(self) -> Reading {
         match self {
-            Reader::Pympcdi => Layout::Centres,
-            _ => Layout::Edges,
+            Reader::Vesa => Reading::BILINEAR,
+            Reader::Pympcdi => Reading {
+                layout: Layout::Centres,
+                cells: Cells::Bilinear,
+            },
+            Reader::Ndisplay | Reader::Watchout | Reader::Sgct => Reading {
+                layout: Layout::Edges,
+                cells: Cells::Any,
+            },
         }
     }
 

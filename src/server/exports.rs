@@ -7,6 +7,7 @@ use super::ApiError;
 use super::jobs::{Job, job, run_job};
 use super::outputs::file;
 use super::state::{AppState, Query};
+use crate::export::bourke::MeshReader;
 use crate::export::channel::{Sources, Tolerance};
 use crate::export::mpcdi::{self, Profile, Reader, Version};
 use crate::export::{content_uv_unbounded, inside, pfm_bytes, remap_pgm_bytes, stmap};
@@ -24,6 +25,10 @@ use std::sync::atomic::AtomicBool;
 pub struct ExportQuery {
     #[serde(default)]
     tolerance: Option<f64>,
+    /// Whose way of filling a cell `mesh.data`'s grid is sized for (any, the default;
+    /// bilinear, celestia, sgct).
+    #[serde(default)]
+    reader: Option<String>,
 }
 
 /// Default tolerances: half a content pixel, one millimetre on the wall.
@@ -117,12 +122,24 @@ pub async fn channel_export(
             TOL_2D
         },
     )?;
+    let reader = match (q.reader.as_deref(), name.as_str()) {
+        (None, _) => MeshReader::Any,
+        (Some(r), "mesh.data") => MeshReader::parse(r, "reader")?,
+        (Some(_), _) => {
+            return Err(ApiError::Invalid {
+                field: "reader".into(),
+                reason: format!("only mesh.data is sized for a reader, not {name}"),
+            });
+        }
+    };
     let j = job(&s, &id).await?;
     let etag = j.etag();
     let id2 = id.clone();
-    let made = run_job(&s, move |cancel| make(owned(j, &id2)?, &name, tol, cancel))
-        .await
-        .map_err(unmet)?;
+    let made = run_job(&s, move |cancel| {
+        make(owned(j, &id2)?, &name, tol, reader, cancel)
+    })
+    .await
+    .map_err(unmet)?;
     let resp = file(&s, made.bytes, made.mime, &etag)?;
     Ok(match made.grid {
         Some((c, r, e)) => with_grid(resp, c, r, e),
@@ -148,7 +165,13 @@ fn unmet(e: ApiError) -> ApiError {
     }
 }
 
-fn make(o: Owned, name: &str, tol: Tolerance, cancel: &AtomicBool) -> Result<Made, ApiError> {
+fn make(
+    o: Owned,
+    name: &str,
+    tol: Tolerance,
+    reader: MeshReader,
+    cancel: &AtomicBool,
+) -> Result<Made, ApiError> {
     let src = o.sources(cancel);
     let pfm = "image/x-portable-floatmap";
     Ok(match name {
@@ -183,7 +206,7 @@ fn make(o: Owned, name: &str, tol: Tolerance, cancel: &AtomicBool) -> Result<Mad
             }
         }
         "mesh.data" => {
-            let (text, c) = src.bourke(tol)?;
+            let (text, c) = src.bourke(tol, reader)?;
             Made {
                 bytes: text.into_bytes(),
                 mime: "text/plain",
