@@ -386,3 +386,178 @@ fn todays_packages_show_what_the_real_readers_showed() {
         }
     }
 }
+
+impl Case {
+    /// One of the centre channel's single-channel exports, by `--format`.
+    fn export_centre(&self, format: &str, out: &str, extra: &[&str]) -> String {
+        let rig = fixtures().join("rig.json");
+        let path = self.path(out);
+        let mut args = vec![
+            "export",
+            "--rig",
+            rig.to_str().unwrap(),
+            "--channel",
+            "centre",
+            "--format",
+            format,
+            "--projection",
+            "equirect",
+            "--hfov",
+            "360",
+            "--vfov",
+            "180",
+            "--content-size",
+            "1024x512",
+            "--out",
+            &path,
+        ];
+        args.extend_from_slice(extra);
+        omniwarp(&args);
+        path
+    }
+
+    /// The centre channel's warp rendered without its blend (what the single-channel exports
+    /// map), with `filter`.
+    fn render_unblended(&self, filter: &str) -> image::RgbaImage {
+        let rig = fixtures().join("rig.json");
+        let warp = self.path("centre.exr");
+        omniwarp(&[
+            "warp",
+            "--rig",
+            rig.to_str().unwrap(),
+            "--channel",
+            "centre",
+            "--out",
+            &warp,
+        ]);
+        let out = self.path(&format!("unblended-{filter}.png"));
+        omniwarp(&[
+            "render",
+            "--normal-map",
+            &warp,
+            "--content",
+            &self.path("content.png"),
+            "--content-format",
+            "equirect",
+            "--filter",
+            filter,
+            "--out",
+            &out,
+        ]);
+        image::open(out).unwrap().to_rgba8()
+    }
+}
+
+/// An image of `w` × `h` showing the content where `at` maps pixel (i, j) (content pixels,
+/// pixel-centre coordinates), transparent where it maps nothing.
+fn shown(w: usize, h: usize, at: impl Fn(usize, usize) -> Option<[f64; 3]>) -> image::RgbaImage {
+    image::RgbaImage::from_fn(w as u32, h as u32, |i, j| {
+        match at(i as usize, j as usize) {
+            Some(c) => image::Rgba([
+                c[0].round() as u8,
+                c[1].round() as u8,
+                c[2].round() as u8,
+                255,
+            ]),
+            None => image::Rgba([0; 4]),
+        }
+    })
+}
+
+/// The ST-map, the 2d PFM and ffmpeg's remap maps, read as Nuke (u across, v up), OpenCV (the
+/// PFM's rows bottom-up on disk, nodes edge to edge) and ffmpeg (absolute pixels, 65535 for
+/// none) read them, show omniwarp's render; and what OpenImageIO, OpenCV and ffmpeg themselves
+/// showed (calibration/interop/make_channel_fixtures.sh) is still what today's exports show.
+#[test]
+fn single_channel_exports_show_what_oiio_opencv_and_ffmpeg_showed() {
+    let case = Case::new();
+    let media = &case.media;
+    let (cw, ch) = (f64::from(media.width()), f64::from(media.height()));
+    let bilinear = case.render_unblended("bilinear");
+    let nearest = case.render_unblended("nearest");
+    let (w, h) = (bilinear.width() as usize, bilinear.height() as usize);
+    let real = |name: &str| image::open(fixtures().join(name)).unwrap().to_rgba8();
+
+    let st = case.export_centre("stmap", "st.exr", &[]);
+    let (stmap, _) = omniwarp::image_io::read_exr_rgba(Path::new(&st)).unwrap();
+    let ours = shown(w, h, |i, j| {
+        let [u, v, _, a] = stmap.data[j * w + i];
+        (a > 0.0).then(|| {
+            sample(
+                media,
+                f64::from(u) * cw - 0.5,
+                (1.0 - f64::from(v)) * ch - 0.5,
+            )
+        })
+    });
+    let (db, db_real) = (
+        psnr(&bilinear, &ours),
+        psnr(&ours, &real("oiio-stmap-centre.png")),
+    );
+    eprintln!("stmap: {db:.2} dB vs render, {db_real:.2} dB vs OpenImageIO's");
+    assert!(db >= 40.0 && db_real >= 35.0, "{db} {db_real}");
+
+    let pfm = std::fs::read(case.export_centre("pfm2d", "g.pfm", &[])).unwrap();
+    let text = String::from_utf8_lossy(&pfm[..32]).to_string();
+    let mut head = text.split_ascii_whitespace();
+    assert_eq!(head.next(), Some("PF"));
+    let nx: usize = head.next().unwrap().parse().unwrap();
+    let ny: usize = head.next().unwrap().parse().unwrap();
+    let body = &pfm[pfm.len() - nx * ny * 12..];
+    // Bottom row first on disk.
+    let node = |x: usize, y: usize| {
+        let k = ((ny - 1 - y) * nx + x) * 12;
+        let f = |o: usize| {
+            f64::from(f32::from_le_bytes(
+                body[k + o..k + o + 4].try_into().unwrap(),
+            ))
+        };
+        [f(0), f(4)]
+    };
+    let ours = shown(w, h, |i, j| {
+        let gx = (i as f64 + 0.5) / w as f64 * (nx - 1) as f64;
+        let gy = (j as f64 + 0.5) / h as f64 * (ny - 1) as f64;
+        let (x0, y0) = ((gx as usize).min(nx - 2), (gy as usize).min(ny - 2));
+        let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+        let mut uv = [0.0; 2];
+        for (x, y, wt) in [
+            (x0, y0, (1.0 - fx) * (1.0 - fy)),
+            (x0 + 1, y0, fx * (1.0 - fy)),
+            (x0, y0 + 1, (1.0 - fx) * fy),
+            (x0 + 1, y0 + 1, fx * fy),
+        ] {
+            let n = node(x, y);
+            uv = [uv[0] + wt * n[0], uv[1] + wt * n[1]];
+        }
+        (uv.iter().all(|c| (0.0..=1.0).contains(c)))
+            .then(|| sample(media, uv[0] * cw - 0.5, uv[1] * ch - 0.5))
+    });
+    let (db, db_real) = (
+        psnr(&bilinear, &ours),
+        psnr(&ours, &real("opencv-pfm2d-centre.png")),
+    );
+    eprintln!("pfm2d: {db:.2} dB vs render, {db_real:.2} dB vs OpenCV's");
+    assert!(db >= 40.0 && db_real >= 35.0, "{db} {db_real}");
+
+    let xmap =
+        std::fs::read(case.export_centre("remap", "x.pgm", &["--ymap", &case.path("y.pgm")]))
+            .unwrap();
+    let ymap = std::fs::read(case.path("y.pgm")).unwrap();
+    let at = |pgm: &[u8], n: usize| {
+        let k = pgm.len() - (w * h - n) * 2;
+        u16::from_be_bytes([pgm[k], pgm[k + 1]])
+    };
+    let ours = shown(w, h, |i, j| {
+        let (x, y) = (at(&xmap, j * w + i), at(&ymap, j * w + i));
+        (x != 65535 && y != 65535).then(|| {
+            let p = media.get_pixel(u32::from(x), u32::from(y)).0;
+            [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]
+        })
+    });
+    let (db, db_real) = (
+        psnr(&nearest, &ours),
+        psnr(&ours, &real("ffmpeg-remap-centre.png")),
+    );
+    eprintln!("remap: {db:.2} dB vs render --filter nearest, {db_real:.2} dB vs ffmpeg's");
+    assert!(db >= 40.0 && db_real >= 35.0, "{db} {db_real}");
+}
