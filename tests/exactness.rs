@@ -115,3 +115,44 @@ fn filters_rank_as_expected() {
         "nearest {n}, bilinear {l}, bicubic {c}"
     );
 }
+
+/// The nearest filter's own frame loop (one texel copied per pixel) shows exactly the texel the
+/// located content position rounds to, for 8-bit and float content; only positions within
+/// 2⁻¹⁶ texel of a half, where the plan's 16-bit fraction rounds, may pick the other texel.
+#[test]
+fn nearest_copies_the_texel_the_position_rounds_to() {
+    use omniwarp::content::Locate;
+    let (w, h) = (400u32, 300u32);
+    let v = view("fisheye", params(None, None, Some(200.0)), w, h);
+    let cube = CubeMap::<[f32; 4]>::from_fn(64, 1, |d| Pattern::Checker.eval(d));
+    let cube8 = CubeMap::<[u8; 4]>::from_fn(64, 1, |d| {
+        Pattern::Smooth.eval(d).map(|c| (c * 255.0).round() as u8)
+    });
+    let (float, bytes) = (Content::cube(&cube), Content::cube(&cube8));
+    let got = render(Warp::View(&v), &float, w, h, 1, Filter::Nearest).unwrap();
+    let got8 = render(Warp::View(&v), &bytes, w, h, 1, Filter::Nearest).unwrap();
+    let (mut shown, mut ties) = (0, 0);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let (s, t) = screen_of_pixel(x as f64 + 0.5, y as f64 + 0.5, w, h);
+            let Some((ax, ay)) = v.direction(s, t).ok().and_then(|d| float.locate(d)) else {
+                assert_eq!(got.get(x, y), [0.0; 4], "({x}, {y}) maps nothing");
+                continue;
+            };
+            let near_half = |a: f64| ((a - a.floor()) - 0.5).abs() < 1.0 / 65536.0;
+            if near_half(ax) || near_half(ay) {
+                ties += 1;
+                continue;
+            }
+            let i = (ay + 0.5).floor() as usize * float.atlas().width + (ax + 0.5).floor() as usize;
+            assert_eq!(got.get(x, y), float.atlas().data[i], "({x}, {y})");
+            assert_eq!(got8.get(x, y), bytes.atlas().data[i], "({x}, {y})");
+            shown += 1;
+        }
+    }
+    // The fisheye is symmetric: its centre lines fall on texel halves (200 pixels here).
+    assert!(
+        shown > (w * h / 2) as usize && ties < (w * h / 100) as usize,
+        "{shown} shown, {ties} near a half"
+    );
+}

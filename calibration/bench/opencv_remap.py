@@ -5,7 +5,7 @@ layout (docs/conventions.md's directions and face table; ffmpeg's slots mirror o
 omniwarp::cubemap::Layout). OpenCV filters one image, so lookups across face edges clamp
 instead of reading the neighbour face; that costs it a little PSNR, not time.
 
-usage: opencv_remap.py CUBE_C6X1.png WIDTH HEIGHT FRAMES THREADS OUT.png
+usage: opencv_remap.py CUBE_C6X1.png WIDTH HEIGHT FRAMES THREADS OUT.png [nearest|bilinear|bicubic]
 """
 import sys
 import time
@@ -52,6 +52,12 @@ def maps(n, w, h):
 
 def main():
     src_path, w, h, frames, threads, out = sys.argv[1:7]
+    filter_name = sys.argv[7] if len(sys.argv) > 7 else "bilinear"
+    interp = {
+        "nearest": cv2.INTER_NEAREST,
+        "bilinear": cv2.INTER_LINEAR,
+        "bicubic": cv2.INTER_CUBIC,
+    }[filter_name]
     w, h, frames, threads = int(w), int(h), int(frames), int(threads)
     cv2.setNumThreads(threads)
     src = cv2.imread(src_path, cv2.IMREAD_UNCHANGED)
@@ -59,15 +65,15 @@ def main():
     mx, my = maps(n, w, h)
     dst = None
     for _ in range(2):
-        dst = cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        dst = cv2.remap(src, mx, my, interp, borderMode=cv2.BORDER_REPLICATE)
     times = []
     for _ in range(frames):
         t0 = time.perf_counter()
-        cv2.remap(src, mx, my, cv2.INTER_LINEAR, dst=dst, borderMode=cv2.BORDER_REPLICATE)
+        cv2.remap(src, mx, my, interp, dst=dst, borderMode=cv2.BORDER_REPLICATE)
         times.append(time.perf_counter() - t0)
     times.sort()
     med = times[len(times) // 2]
-    print(f"opencv remap (float maps, {src.shape[2]} channels, {threads} threads): "
+    print(f"opencv remap ({filter_name}, float maps, {src.shape[2]} channels, {threads} threads): "
           f"{med * 1e3:.2f} ms/frame, {w * h / med / 1e6:.0f} Mpixel/s (cv2 {cv2.__version__})")
     cv2.imwrite(out, dst)
 

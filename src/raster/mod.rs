@@ -1,6 +1,7 @@
 //! A plain row-major image of RGBA pixels, top row first, and the two pixel types the renderer
 //! works on: 8-bit ([u8; 4], values 0–255) and float ([f32; 4], nominally 0–1).
 
+pub(crate) mod cubic;
 mod kernel;
 
 use crate::error::{Error, Result};
@@ -68,6 +69,11 @@ pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 's
     fn bilinear_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
         bilinear_span_portable(data, stride, taps, out);
     }
+
+    /// Bicubic (Catmull–Rom) lookup of the 4×4 block around a tap that covers something.
+    fn bicubic(data: &[Self], stride: usize, t: Tap) -> Self {
+        Self::from_f32(cubic::bicubic_f32(data, stride, t))
+    }
 }
 
 impl Pixel for [u8; 4] {
@@ -86,6 +92,11 @@ impl Pixel for [u8; 4] {
 
     fn bilinear_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
         kernel::bilinear_span_rgba8(data, stride, taps, out);
+    }
+
+    #[inline]
+    fn bicubic(data: &[Self], stride: usize, t: Tap) -> Self {
+        cubic::bicubic_rgba8(data, stride, t)
     }
 }
 

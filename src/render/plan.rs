@@ -69,10 +69,21 @@ impl Plan {
                                 // The atlas border keeps every tap of a covered sample inside;
                                 // checking here, once, lets the frame loop index without fear.
                                 if xi >= 1 && yi >= 1 && xi + 2 < aw && yi + 2 < ah {
-                                    row[n] = Tap {
-                                        idx: (yi * aw + xi) as u32,
-                                        fx,
-                                        fy,
+                                    row[n] = if filter == Filter::Nearest {
+                                        // The texel is chosen now, once, not every frame.
+                                        let dx = i64::from(fx >= 32768);
+                                        let dy = i64::from(fy >= 32768);
+                                        Tap {
+                                            idx: ((yi + dy) * aw + xi + dx) as u32,
+                                            fx: 0,
+                                            fy: 0,
+                                        }
+                                    } else {
+                                        Tap {
+                                            idx: (yi * aw + xi) as u32,
+                                            fx,
+                                            fy,
+                                        }
                                     };
                                 }
                             }
@@ -159,6 +170,37 @@ impl Plan {
                 });
             return Ok(());
         }
+        if self.filter == Filter::Nearest && kk == 1 {
+            // One texel per pixel, chosen when the plan was built, copied as it is: no
+            // conversion to float and back (the general path below gives the same bits, about
+            // ten times slower).
+            out.data
+                .par_chunks_mut(w * BAND_ROWS)
+                .zip(self.taps.par_chunks(w * BAND_ROWS))
+                .for_each(|(band, taps)| {
+                    // A tap that covers nothing (u32::MAX) lies past the atlas: the default.
+                    for (o, t) in band.iter_mut().zip(taps) {
+                        *o = data.get(t.idx as usize).copied().unwrap_or_default();
+                    }
+                });
+            return Ok(());
+        }
+        if self.filter == Filter::Bicubic && kk == 1 {
+            // The pixel type's own lookup: fixed point for 8-bit content.
+            out.data
+                .par_chunks_mut(w * BAND_ROWS)
+                .zip(self.taps.par_chunks(w * BAND_ROWS))
+                .for_each(|(band, taps)| {
+                    for (o, t) in band.iter_mut().zip(taps) {
+                        if t.idx != u32::MAX {
+                            *o = T::bicubic(data, aw, *t);
+                        } else {
+                            *o = T::default();
+                        }
+                    }
+                });
+            return Ok(());
+        }
         let filter = self.filter;
         out.data
             .par_chunks_mut(w)
@@ -204,11 +246,8 @@ fn prefetch<T>(data: &[T], i: usize, stride: usize) {
 fn sample<T: Pixel>(data: &[T], aw: usize, t: Tap, filter: Filter) -> [f32; 4] {
     let i = t.idx as usize;
     match filter {
-        Filter::Nearest => {
-            let dx = usize::from(t.fx >= 32768);
-            let dy = usize::from(t.fy >= 32768);
-            data[i + dx + dy * aw].to_f32()
-        }
+        // The plan chose the texel when it was built.
+        Filter::Nearest => data[i].to_f32(),
         Filter::Bilinear => T::bilinear(
             data[i],
             data[i + 1],
@@ -218,49 +257,13 @@ fn sample<T: Pixel>(data: &[T], aw: usize, t: Tap, filter: Filter) -> [f32; 4] {
             t.fy,
         )
         .to_f32(),
-        Filter::Bicubic => {
-            let wx = catmull_rom(f32::from(t.fx) / 65536.0);
-            let wy = catmull_rom(f32::from(t.fy) / 65536.0);
-            let mut acc = [0.0f32; 4];
-            for (r, wyr) in wy.iter().enumerate() {
-                let base = i + r * aw - aw - 1;
-                for (c, wxc) in wx.iter().enumerate() {
-                    let v = data[base + c].to_f32();
-                    let wgt = wyr * wxc;
-                    for (a, x) in acc.iter_mut().zip(v) {
-                        *a += wgt * x;
-                    }
-                }
-            }
-            acc
-        }
+        Filter::Bicubic => crate::raster::cubic::bicubic_f32(data, aw, t),
     }
-}
-
-/// Keys' cubic convolution weights (a = −0.5) for taps at −1, 0, 1, 2 around fraction t.
-#[inline]
-fn catmull_rom(t: f32) -> [f32; 4] {
-    let (t2, t3) = (t * t, t * t * t);
-    [
-        -0.5 * t3 + t2 - 0.5 * t,
-        1.5 * t3 - 2.5 * t2 + 1.0,
-        -1.5 * t3 + 2.0 * t2 + 0.5 * t,
-        0.5 * t3 - 0.5 * t2,
-    ]
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn catmull_rom_weights_sum_to_one_and_interpolate() {
-        for t in [0.0, 0.25, 0.5, 0.9] {
-            let w = catmull_rom(t);
-            assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-6);
-        }
-        assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
-    }
 
     #[test]
     fn split_carries_a_fraction_that_rounds_up() {

@@ -2,7 +2,7 @@
 //! rendered into one buffer, as a media server runs it), the machine's memory bandwidth, and
 //! the bound that bandwidth puts on the warp.
 
-use super::super::args::{ProjectionArgs, parse_size};
+use super::super::args::{FilterArg, ProjectionArgs, parse_size};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::content::Content;
@@ -10,7 +10,7 @@ use omniwarp::content::pattern::Pattern;
 use omniwarp::cubemap::{CubeMap, Layout};
 use omniwarp::image_io::{self, Loaded};
 use omniwarp::raster::{Pixel, Raster, psnr};
-use omniwarp::render::{Filter, Plan, Warp, render_fn};
+use omniwarp::render::{Plan, Warp, render_fn};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -28,6 +28,9 @@ pub struct BenchArgs {
     /// Frames to time after two warm-up frames.
     #[arg(long, default_value_t = 30)]
     frames: u32,
+    /// Texture filter of the timed frames.
+    #[arg(long, value_enum, default_value = "bilinear")]
+    filter: FilterArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -80,7 +83,8 @@ fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
     let content = Content::cube(&cube);
 
     let t = Instant::now();
-    let plan = Plan::new(warp, &content, content.atlas(), w, h, 1, Filter::Bilinear)?;
+    let filter = super::super::args::filter(a.filter);
+    let plan = Plan::new(warp, &content, content.atlas(), w, h, 1, filter)?;
     let plan_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut frame = Raster::new(w as usize, h as usize);
     for _ in 0..2 {
@@ -103,7 +107,10 @@ fn bench(a: &BenchArgs, threads: usize) -> Result<()> {
     let bytes_per_pixel = 16.0 + texture / (f64::from(w) * f64::from(h));
     let bound = bandwidth / bytes_per_pixel / 1e6;
 
-    outln!("omniwarp CPU warp, bilinear, RGBA8, {threads} threads");
+    outln!(
+        "omniwarp CPU warp, {}, RGBA8, {threads} threads",
+        format!("{filter:?}").to_lowercase()
+    );
     outln!("  content          6 × {n}² cube map");
     outln!("  output           {w}×{h} {}", view.projection().name());
     outln!("  plan (once)      {plan_ms:.1} ms");
