@@ -4,7 +4,8 @@
 //! Fixed point: the fraction is taken to 1/256 texel (a position error of at most 1/512 texel)
 //! and the weights to 1/4096, summing to exactly 4096 at every fraction so a flat area stays
 //! flat. The horizontal pass keeps 8 fractional bits, the vertical pass rounds once. Against the
-//! float lookup of the same texels the result differs by at most one level (a test checks).
+//! float lookup of the same texels the result differs by at most one level (a test checks). An
+//! AVX2 twin computes the same bits, two texels of a row per multiply.
 
 use super::{Pixel, Tap};
 use std::sync::OnceLock;
@@ -82,6 +83,73 @@ pub(crate) fn bicubic_rgba8(data: &[[u8; 4]], stride: usize, t: Tap) -> [u8; 4] 
     acc.map(|a| ((a + (1 << 19)) >> 20).clamp(0, 255) as u8)
 }
 
+/// [`bicubic_rgba8`] for a run of taps (a tap that covers nothing gives a transparent pixel):
+/// AVX2 where the processor has it, the scalar kernel elsewhere.
+pub(crate) fn bicubic_span_rgba8(
+    data: &[[u8; 4]],
+    stride: usize,
+    taps: &[Tap],
+    out: &mut [[u8; 4]],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor supports AVX2, checked just above.
+        unsafe { span_avx2(data, stride, taps, out) };
+        return;
+    }
+    span_scalar(data, stride, taps, out);
+}
+
+fn span_scalar(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[u8; 4]]) {
+    for (o, t) in out.iter_mut().zip(taps) {
+        *o = if t.idx == u32::MAX {
+            [0; 4]
+        } else {
+            bicubic_rgba8(data, stride, *t)
+        };
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn span_avx2(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[u8; 4]]) {
+    use std::arch::x86_64::*;
+    let table = table();
+    let step = |f: u16| ((u32::from(f) + 128) >> 8) as usize;
+    for (o, t) in out.iter_mut().zip(taps) {
+        if t.idx == u32::MAX {
+            *o = [0; 4];
+            continue;
+        }
+        let (wx, wy) = (table[step(t.fx)], table[step(t.fy)]);
+        let base = t.idx as usize - stride - 1;
+        // The 4×4 block, bounds-checked once; each row's four texels are 16 contiguous bytes.
+        let block = &data[base..base + 3 * stride + 4];
+        // Lanes 0–3 weigh texel 0 (then 2), lanes 4–7 texel 1 (then 3).
+        let w01 = _mm256_setr_epi32(wx[0], wx[0], wx[0], wx[0], wx[1], wx[1], wx[1], wx[1]);
+        let w23 = _mm256_setr_epi32(wx[2], wx[2], wx[2], wx[2], wx[3], wx[3], wx[3], wx[3]);
+        let mut acc = _mm_setzero_si128();
+        for (r, wyr) in wy.iter().enumerate() {
+            let row = &block[r * stride..r * stride + 4];
+            // SAFETY: `row` is four [u8; 4] texels, 16 bytes; an unaligned load reads them.
+            let bytes = unsafe { _mm_loadu_si128(row.as_ptr().cast()) };
+            let t01 = _mm256_cvtepu8_epi32(bytes);
+            let t23 = _mm256_cvtepu8_epi32(_mm_srli_si128::<8>(bytes));
+            let sum = _mm256_add_epi32(_mm256_mullo_epi32(t01, w01), _mm256_mullo_epi32(t23, w23));
+            let h = _mm_add_epi32(
+                _mm256_castsi256_si128(sum),
+                _mm256_extracti128_si256::<1>(sum),
+            );
+            let h = _mm_srai_epi32::<4>(_mm_add_epi32(h, _mm_set1_epi32(8)));
+            acc = _mm_add_epi32(acc, _mm_mullo_epi32(h, _mm_set1_epi32(*wyr)));
+        }
+        let v = _mm_srai_epi32::<20>(_mm_add_epi32(acc, _mm_set1_epi32(1 << 19)));
+        // Saturating packs clamp to 0..=255 as the scalar kernel does.
+        let px = _mm_packus_epi16(_mm_packs_epi32(v, v), _mm_setzero_si128());
+        *o = _mm_cvtsi128_si32(px).to_le_bytes();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -129,5 +197,38 @@ mod tests {
             assert_eq!(bicubic_rgba8(&flat, w, t), flat[0]);
         }
         assert!(worst <= 1, "{worst} levels apart");
+    }
+
+    /// The AVX2 kernel gives exactly the scalar kernel's bits.
+    #[test]
+    fn simd_and_scalar_bicubic_agree_bit_for_bit() {
+        let stride = 9;
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let data: Vec<[u8; 4]> = (0..stride * 8)
+            .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
+            .collect();
+        let mut taps: Vec<Tap> = (0..5000)
+            .map(|_| {
+                let r = next();
+                let (x, y) = (1 + r as usize % (stride - 3), 1 + (r >> 8) as usize % 5);
+                Tap {
+                    idx: (y * stride + x) as u32,
+                    fx: (r >> 20) as u16,
+                    fy: (r >> 40) as u16,
+                }
+            })
+            .collect();
+        taps.push(Tap::NONE);
+        let mut fast = vec![[9u8; 4]; taps.len()];
+        let mut slow = vec![[7u8; 4]; taps.len()];
+        bicubic_span_rgba8(&data, stride, &taps, &mut fast);
+        span_scalar(&data, stride, &taps, &mut slow);
+        assert_eq!(fast, slow);
     }
 }

@@ -70,9 +70,16 @@ pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 's
         bilinear_span_portable(data, stride, taps, out);
     }
 
-    /// Bicubic (Catmull–Rom) lookup of the 4×4 block around a tap that covers something.
-    fn bicubic(data: &[Self], stride: usize, t: Tap) -> Self {
-        Self::from_f32(cubic::bicubic_f32(data, stride, t))
+    /// Bicubic (Catmull–Rom) lookups for a run of taps, the default pixel where a tap covers
+    /// nothing; 8-bit pixels run a fixed-point kernel.
+    fn bicubic_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
+        for (o, t) in out.iter_mut().zip(taps) {
+            *o = if t.idx == u32::MAX {
+                Self::default()
+            } else {
+                Self::from_f32(cubic::bicubic_f32(data, stride, *t))
+            };
+        }
     }
 }
 
@@ -94,9 +101,8 @@ impl Pixel for [u8; 4] {
         kernel::bilinear_span_rgba8(data, stride, taps, out);
     }
 
-    #[inline]
-    fn bicubic(data: &[Self], stride: usize, t: Tap) -> Self {
-        cubic::bicubic_rgba8(data, stride, t)
+    fn bicubic_span(data: &[Self], stride: usize, taps: &[Tap], out: &mut [Self]) {
+        cubic::bicubic_span_rgba8(data, stride, taps, out);
     }
 }
 

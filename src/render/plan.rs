@@ -190,15 +190,7 @@ impl Plan {
             out.data
                 .par_chunks_mut(w * BAND_ROWS)
                 .zip(self.taps.par_chunks(w * BAND_ROWS))
-                .for_each(|(band, taps)| {
-                    for (o, t) in band.iter_mut().zip(taps) {
-                        if t.idx != u32::MAX {
-                            *o = T::bicubic(data, aw, *t);
-                        } else {
-                            *o = T::default();
-                        }
-                    }
-                });
+                .for_each(|(band, taps)| T::bicubic_span(data, aw, taps, band));
             return Ok(());
         }
         let filter = self.filter;
