@@ -135,6 +135,19 @@ fn read_region(pkg: &[u8], id: &str, c: Conventions) -> RegionRead {
     }
 }
 
+/// The four nodes around fractional node index (gx, gy) of an nx × ny grid and their bilinear
+/// weights.
+fn corners(gx: f64, gy: f64, nx: usize, ny: usize) -> [(usize, usize, f64); 4] {
+    let (x0, y0) = ((gx as usize).min(nx - 2), (gy as usize).min(ny - 2));
+    let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
+    [
+        (x0, y0, (1.0 - fx) * (1.0 - fy)),
+        (x0 + 1, y0, fx * (1.0 - fy)),
+        (x0, y0 + 1, (1.0 - fx) * fy),
+        (x0 + 1, y0 + 1, fx * fy),
+    ]
+}
+
 /// Bilinear at pixel-centre coordinates, clamped to the image.
 fn sample(img: &image::RgbaImage, x: f64, y: f64) -> [f64; 3] {
     let (w, h) = (img.width() as f64, img.height() as f64);
@@ -178,15 +191,8 @@ fn show(r: &RegionRead, c: Conventions, media: &image::RgbaImage) -> image::Rgba
     let (mw, mh) = (f64::from(media.width()), f64::from(media.height()));
     image::RgbaImage::from_fn(w as u32, h as u32, |i, j| {
         let (gx, gy) = (node(i as usize, w, nx), node(j as usize, h, ny));
-        let (x0, y0) = ((gx as usize).min(nx - 2), (gy as usize).min(ny - 2));
-        let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
         let mut uv = [0.0f64; 2];
-        for (px, py, wt) in [
-            (x0, y0, (1.0 - fx) * (1.0 - fy)),
-            (x0 + 1, y0, fx * (1.0 - fy)),
-            (x0, y0 + 1, (1.0 - fx) * fy),
-            (x0 + 1, y0 + 1, fx * fy),
-        ] {
+        for (px, py, wt) in corners(gx, gy, nx, ny) {
             if wt == 0.0 {
                 continue;
             }
@@ -517,15 +523,8 @@ fn single_channel_exports_show_what_oiio_opencv_and_ffmpeg_showed() {
     let ours = shown(w, h, |i, j| {
         let gx = (i as f64 + 0.5) / w as f64 * (nx - 1) as f64;
         let gy = (j as f64 + 0.5) / h as f64 * (ny - 1) as f64;
-        let (x0, y0) = ((gx as usize).min(nx - 2), (gy as usize).min(ny - 2));
-        let (fx, fy) = (gx - x0 as f64, gy - y0 as f64);
         let mut uv = [0.0; 2];
-        for (x, y, wt) in [
-            (x0, y0, (1.0 - fx) * (1.0 - fy)),
-            (x0 + 1, y0, fx * (1.0 - fy)),
-            (x0, y0 + 1, (1.0 - fx) * fy),
-            (x0 + 1, y0 + 1, fx * fy),
-        ] {
+        for (x, y, wt) in corners(gx, gy, nx, ny) {
             let n = node(x, y);
             uv = [uv[0] + wt * n[0], uv[1] + wt * n[1]];
         }

@@ -1016,19 +1016,25 @@ fn compare_warps(a: &[u8], b: &[u8]) -> (f64, usize, usize) {
     (worst, lit_a, lit_b)
 }
 
+/// The edit list of the README walkthrough's tile PATCH, as written there.
+fn readme_patch() -> String {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    readme
+        .split("-d '{\"edits\": ")
+        .nth(1)
+        .and_then(|rest| rest.split("}'").next())
+        .expect("the README's PATCH")
+        .to_string()
+}
+
 /// The README walkthrough's PATCH on the demo rig (issue 14): the tiles that straddle the
 /// wall's curved top and bottom edges stay drawn (the warp's footprint cuts them, not the tile
 /// grid), so the edited warp lights the same pixels and stays within 0.5° of the exact one.
 /// Before: 13.2 % → 17.7 % of the pixels went dark and the edges became notches.
 #[tokio::test]
 async fn the_readme_walkthrough_patch_keeps_the_wall_edge() {
-    let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
-    let patch = readme
-        .split("-d '{\"edits\": ")
-        .nth(1)
-        .and_then(|rest| rest.split("}'").next())
-        .expect("the README's PATCH");
+    let patch = readme_patch();
     let body = format!("{{\"edits\": {patch}}}");
     let demo = state_with(
         None,
@@ -1462,13 +1468,7 @@ fn triangle_reader(
 /// full-resolution file).
 #[tokio::test]
 async fn exports_keep_their_tolerance_on_an_exact_and_a_tile_edited_channel() {
-    let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
-    let patch = readme
-        .split("-d '{\"edits\": ")
-        .nth(1)
-        .and_then(|rest| rest.split("}'").next())
-        .expect("the README's PATCH");
+    let patch = readme_patch();
     let demo = state_with(
         None,
         None,

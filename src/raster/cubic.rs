@@ -170,13 +170,7 @@ mod tests {
     #[test]
     fn fixed_point_stays_within_a_level_of_float() {
         let (w, h) = (16usize, 16usize);
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = crate::raster::xorshift(0x2545_f491_4f6c_dd1du64);
         let data: Vec<[u8; 4]> = (0..w * h)
             .map(|_| std::array::from_fn(|_| next() as u8))
             .collect();
@@ -203,13 +197,7 @@ mod tests {
     #[test]
     fn simd_and_scalar_bicubic_agree_bit_for_bit() {
         let stride = 9;
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = crate::raster::xorshift(0x9e37_79b9_7f4a_7c15u64);
         let data: Vec<[u8; 4]> = (0..stride * 8)
             .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
             .collect();

@@ -181,13 +181,7 @@ mod tests {
     #[test]
     fn simd_and_portable_kernels_agree_bit_for_bit() {
         let stride = 7;
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut next = crate::raster::xorshift(0x2545_f491_4f6c_dd1du64);
         let data: Vec<[u8; 4]> = (0..stride * 6)
             .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
             .collect();

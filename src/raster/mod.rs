@@ -4,6 +4,17 @@
 pub(crate) mod cubic;
 mod kernel;
 
+/// A seeded xorshift64 stream: the kernel tests' random texels and taps, the same every run.
+#[cfg(test)]
+pub(crate) fn xorshift(mut seed: u64) -> impl FnMut() -> u64 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    }
+}
+
 use crate::error::{Error, Result};
 
 /// One output sample of a render plan (`render::Plan`): the atlas texel at or before the sample position, and the fraction of a
