@@ -156,3 +156,198 @@ fn nearest_copies_the_texel_the_position_rounds_to() {
         "{shown} shown, {ties} near a half"
     );
 }
+
+/// The plan interpolates sample positions over a lattice where it has shown that to be close
+/// (`render::lattice`). Against the plan with every position exact, over views and contents
+/// chosen for what breaks interpolation — cube-face seams, the ±180° wrap, poles, a fisheye's
+/// circle, a partial panorama's edge, supersampling, a normal map with holes — coverage and
+/// nearest texels are identical and every other tap lies within the stated bound.
+#[test]
+fn the_interpolated_plan_keeps_within_its_bound_of_the_exact_one() {
+    use glam::DVec3;
+    use omniwarp::normalmap::NormalMap;
+    use omniwarp::projection::{self, Orientation, View};
+    use omniwarp::render::Plan;
+    use omniwarp::render::lattice::BOUND;
+
+    let (w, h) = (480u32, 270u32);
+    let turned = |name: &str, p, to: [f64; 3], up: [f64; 3], offaxis: [f64; 3]| {
+        let o = Orientation::look(DVec3::from(to), DVec3::from(up)).unwrap();
+        let projection = projection::build(name, &p, f64::from(h) / f64::from(w)).unwrap();
+        View::new(projection, o, DVec3::from(offaxis), 1.0).unwrap()
+    };
+    let views = [
+        (
+            "flat",
+            view("flat", params(Some(100.0), Some(70.0), None), w, h),
+        ),
+        (
+            "flat turned off-axis",
+            turned(
+                "flat",
+                params(Some(90.0), Some(60.0), None),
+                [1.0, 0.4, -1.0],
+                [0.2, 1.0, 0.0],
+                [0.1, -0.2, 0.1],
+            ),
+        ),
+        (
+            "cylindrical 360",
+            view("cylindrical", params(Some(360.0), Some(90.0), None), w, h),
+        ),
+        (
+            "fisheye 200",
+            view("fisheye", params(None, None, Some(200.0)), w, h),
+        ),
+        (
+            "fisheye 180 at the zenith",
+            turned(
+                "fisheye",
+                params(None, None, Some(180.0)),
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [0.0; 3],
+            ),
+        ),
+        (
+            "equirect",
+            view("equirect", params(Some(360.0), Some(180.0), None), w, h),
+        ),
+    ];
+    let cube = CubeMap::<[u8; 4]>::from_fn(96, 1, |_| [0; 4]);
+    let pano = Raster::<[u8; 4]>::new(512, 256);
+    let contents = [
+        ("cube", Content::cube(&cube)),
+        (
+            "equirect 360",
+            Content::equirect(&pano, 360.0, 180.0).unwrap(),
+        ),
+        (
+            "equirect 200×100",
+            Content::equirect(&pano, 200.0, 100.0).unwrap(),
+        ),
+        (
+            "cylindrical 120",
+            Content::cylindrical(&pano, 120.0, 80.0).unwrap(),
+        ),
+    ];
+    let compare = |what: &str, plan: Plan, exact: Plan, aw: usize| {
+        let (mut interpolated, mut worst) = (0usize, 0.0f64);
+        let at = |t: &omniwarp::render::Tap| {
+            let i = t.idx as usize;
+            (
+                (i % aw) as f64 + f64::from(t.fx) / 65536.0,
+                (i / aw) as f64 + f64::from(t.fy) / 65536.0,
+            )
+        };
+        for (n, (a, b)) in plan.taps().iter().zip(exact.taps()).enumerate() {
+            assert_eq!(
+                a.idx == u32::MAX,
+                b.idx == u32::MAX,
+                "{what}: coverage of sample {n}"
+            );
+            if a.idx == u32::MAX || a == b {
+                continue;
+            }
+            interpolated += 1;
+            let ((ax, ay), (bx, by)) = (at(a), at(b));
+            // Tap fractions are rounded to 1/65536 texel on both sides.
+            let d = (ax - bx).abs().max((ay - by).abs());
+            assert!(
+                d <= BOUND + 1.0 / 65536.0,
+                "{what}: sample {n} is {d} texel off"
+            );
+            worst = worst.max(d);
+        }
+        (interpolated, worst)
+    };
+    let mut differing = 0;
+    for (vname, v) in &views {
+        for (cname, c) in &contents {
+            let aw = c.atlas().width;
+            for (filter, k) in [
+                (Filter::Bilinear, 1),
+                (Filter::Nearest, 1),
+                (Filter::Bilinear, 2),
+            ] {
+                let what = format!("{vname} of {cname}, {filter:?}, {k}×{k}");
+                let plan = Plan::new(Warp::View(v), c, c.atlas(), w, h, k, filter).unwrap();
+                let exact = Plan::exact(Warp::View(v), c, c.atlas(), w, h, k, filter).unwrap();
+                let (n, _) = compare(&what, plan, exact, aw);
+                if filter == Filter::Nearest {
+                    assert_eq!(n, 0, "{what}: {n} taps differ from the exact plan's");
+                }
+                differing += n;
+            }
+        }
+    }
+    // A normal map with holes punched where the lattice would otherwise paper over them.
+    let v = &views[1].1;
+    let mut map = NormalMap::from_view(v, w, h).unwrap().pixels().clone();
+    // About one pixel in a hundred, scattered.
+    for (n, p) in map.data.iter_mut().enumerate() {
+        if (n * 7919) % 101 == 0 {
+            p[3] = 0.0;
+        }
+    }
+    let map = NormalMap::from_pixels(map, Vec::new()).unwrap();
+    let c = &contents[0].1;
+    let plan = Plan::new(Warp::Map(&map), c, c.atlas(), w, h, 1, Filter::Bilinear).unwrap();
+    let exact = Plan::exact(Warp::Map(&map), c, c.atlas(), w, h, 1, Filter::Bilinear).unwrap();
+    compare("normal map with holes", plan, exact, c.atlas().width);
+    // The lattice was used at all: most bilinear taps differ from the exact ones in the last
+    // bits of their fractions.
+    assert!(differing > 100_000, "{differing} taps interpolated");
+}
+
+/// An edit of part of a normal map reaches its plan through `Plan::redo`: the rows it
+/// rebuilds hold exactly the taps a plan of the new map built from scratch holds, and it
+/// rebuilds only the rows whose interpolation can see the edit.
+#[test]
+fn redoing_the_rows_an_edit_reached_equals_planning_anew() {
+    use omniwarp::normalmap::NormalMap;
+    use omniwarp::render::Plan;
+
+    let (w, h) = (480u32, 270u32);
+    let v = view("flat", params(Some(100.0), Some(70.0), None), w, h);
+    let before = NormalMap::from_view(&v, w, h).unwrap();
+    let cube = CubeMap::<[u8; 4]>::from_fn(96, 1, |_| [0; 4]);
+    let c = Content::cube(&cube);
+    for filter in [Filter::Bilinear, Filter::Nearest] {
+        let mut plan = Plan::new(Warp::Map(&before), &c, c.atlas(), w, h, 1, filter).unwrap();
+        let old = plan.taps().to_vec();
+        // Rows 100..140 turned by a small rotation, as a tile edit turns a region.
+        let mut px = before.pixels().clone();
+        for j in 100..140 {
+            for i in 150..330 {
+                let p = &mut px.data[j * w as usize + i];
+                let (x, z) = (p[0], p[2]);
+                p[0] = x * 0.9998 - z * 0.02;
+                p[2] = x * 0.02 + z * 0.9998;
+            }
+        }
+        let after = NormalMap::from_pixels(px, Vec::new()).unwrap();
+        let rows = plan
+            .redo(Warp::Map(&after), &c, c.atlas(), 100..140)
+            .unwrap();
+        let fresh = Plan::new(Warp::Map(&after), &c, c.atlas(), w, h, 1, filter).unwrap();
+        assert_eq!(
+            plan.taps(),
+            fresh.taps(),
+            "{filter:?}: redone plan ≠ new plan"
+        );
+        // The lattice reaches a cell and a half beyond the edit on either side, no further.
+        assert!(
+            rows.start >= 100 - 48 && rows.end <= 140 + 48,
+            "{filter:?}: rebuilt {rows:?}"
+        );
+        let row =
+            |t: &[omniwarp::render::Tap], j: usize| t[j * w as usize..][..w as usize].to_vec();
+        assert_eq!(
+            row(&old, 10),
+            row(plan.taps(), 10),
+            "rows far away are kept"
+        );
+        assert_ne!(row(&old, 120), row(plan.taps(), 120), "the edit shows");
+    }
+}

@@ -57,6 +57,13 @@ pub struct Content<T> {
 /// centres. `None` where the content does not cover the direction.
 pub trait Locate: Sync {
     fn locate(&self, d: DVec3) -> Option<(f64, f64)>;
+
+    /// The rectangle [x0, y0, x1, y1] outside which `locate` gives `None`, when the content
+    /// covers only part of the sphere that way (a partial panorama). Interpolated positions
+    /// near it are recomputed exactly, so coverage is decided exactly.
+    fn bounds(&self) -> Option<[f64; 4]> {
+        None
+    }
 }
 
 fn panorama_fov(name: &str, deg: f64, max: f64) -> Result<f64> {
@@ -166,6 +173,21 @@ impl<T: Pixel> Locate for Content<T> {
                     return None;
                 }
                 Some((u * w as f64 - 0.5 + pad, v * h as f64 - 0.5 + pad))
+            }
+        }
+    }
+
+    fn bounds(&self) -> Option<[f64; 4]> {
+        match self.kind {
+            Kind::Cube { .. } => None,
+            Kind::Panorama { w, h, .. } => {
+                let pad = PAD as f64;
+                Some([
+                    pad - 0.5,
+                    pad - 0.5,
+                    w as f64 + pad - 0.5,
+                    h as f64 + pad - 0.5,
+                ])
             }
         }
     }

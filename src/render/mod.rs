@@ -9,6 +9,7 @@
 
 pub mod blur;
 pub mod coverage;
+pub mod lattice;
 mod plan;
 
 pub use crate::raster::{MAX_SAMPLES, Tap, check_size};
