@@ -74,7 +74,13 @@ fn the_binary_serves_the_demo_edits_tiles_and_keeps_files_on_disk() {
         .next()
         .unwrap()
         .to_string();
-    let kept = std::fs::read(dir.path().join(format!("warps/centre-{hash}.exr"))).unwrap();
+    // Written after the answer, by the daemon's keeper thread.
+    let path = dir.path().join(format!("warps/centre-{hash}.exr"));
+    let since = std::time::Instant::now();
+    while !path.exists() && since.elapsed().as_secs() < 30 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let kept = std::fs::read(&path).unwrap();
     assert_eq!(
         kept, warp.body,
         "the served warp map is the one kept on disk"

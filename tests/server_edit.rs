@@ -165,14 +165,22 @@ async fn tile_screens_follow_the_geometry_until_edited_and_patch_atomically() {
     assert!(tag.ends_with("-1.2\""), "{tag}");
     let err = largest_angle(&exact, &tiled);
     assert!(err < 0.02, "33×19 tiles vs exact geometry: {err}°");
-    let kept: Vec<String> = std::fs::read_dir(dir.path().join("warps"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .filter(|n| n.starts_with("left-"))
-        .collect();
-    // Kept under the hash in the ETag, and only that one: older warp maps are removed.
+    let kept = || -> Vec<String> {
+        std::fs::read_dir(dir.path().join("warps"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .filter(|n| n.starts_with("left-"))
+            .collect()
+    };
+    // Kept under the hash in the ETag, and only that one: older warp maps are removed (by the
+    // keeper thread, after the answer).
     let hash = tag.trim_matches('"').split('-').next().unwrap();
-    assert_eq!(kept, [format!("left-{hash}.exr")]);
+    let want = [format!("left-{hash}.exr")];
+    let since = std::time::Instant::now();
+    while kept() != want && since.elapsed() < Duration::from_secs(30) {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(kept(), want);
 
     // f = 0 on the whole left half greys the render there.
     let zero: Vec<_> = (0..19)
@@ -1613,4 +1621,87 @@ async fn exports_keep_their_tolerance_on_an_exact_and_a_tile_edited_channel() {
             assert!(nx < size[0] / 4, "{nx} columns: no full-resolution file");
         }
     }
+}
+
+/// Previews are kept ready between requests (issue 15, item 3): a repeated one renders from
+/// what was kept, and one after a local tile edit rebuilds its plan only in the rows the edit
+/// reaches. Either way the picture is, pixel for pixel, the one a daemon that never saw the
+/// earlier requests renders.
+#[tokio::test]
+async fn previews_are_kept_and_rebuilt_only_where_an_edit_reaches() {
+    let demo = || {
+        state_with(
+            None,
+            None,
+            serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+        )
+    };
+    let q = "/v1/channels/centre/render?scale=2&content=checker";
+    let preview = |s: std::sync::Arc<omniwarp::server::AppState>| async move {
+        let (st, h, png) = call(&s, get(q)).await;
+        assert_eq!(st, StatusCode::OK);
+        let how = h["x-omniwarp-preview"].to_str().unwrap().to_string();
+        assert!(h["server-timing"].to_str().unwrap().contains("frame;dur="));
+        let img = image::load_from_memory(&png).unwrap().into_rgba8();
+        (how, img.into_raw())
+    };
+    let patch = |s: std::sync::Arc<omniwarp::server::AppState>, revision: u64, theta: f64| async move {
+        let body = edits(serde_json::json!([
+            {"op": "set_feature", "column": 16, "row": 9, "theta": theta, "f": 0.5}
+        ]));
+        let (st, _, reply) = call(
+            &s,
+            write("PATCH", "/v1/channels/centre/tiles", Some(revision), body),
+        )
+        .await;
+        assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&reply));
+    };
+    let s = demo();
+    let (how, first) = preview(s.clone()).await;
+    assert_eq!(how, "built");
+    let (how, again) = preview(s.clone()).await;
+    assert_eq!((how.as_str(), again == first), ("kept", true));
+
+    // The first edit turns the geometry into a tile screen; the second moves one feature.
+    patch(s.clone(), 1, 9.0).await;
+    preview(s.clone()).await;
+    patch(s.clone(), 2, 8.5).await;
+    let (how, edited) = preview(s.clone()).await;
+    let rows: Vec<usize> = how
+        .strip_prefix("rows ")
+        .unwrap_or_else(|| panic!("rebuilt, not `{how}`"))
+        .split('-')
+        .map(|n| n.parse().unwrap())
+        .collect();
+    // The preview is 540 rows; one feature of a 33 × 19 grid reaches a few tiles' worth.
+    assert!(rows[1] - rows[0] < 200, "rebuilt rows {rows:?}");
+    assert_ne!(edited, first, "the edit shows");
+
+    let fresh = demo();
+    patch(fresh.clone(), 1, 9.0).await;
+    patch(fresh.clone(), 2, 8.5).await;
+    let (how, cold) = preview(fresh.clone()).await;
+    assert_eq!(how, "built");
+    let differing = edited
+        .chunks_exact(4)
+        .zip(cold.chunks_exact(4))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(differing, 0, "pixels differing from a cold preview");
+
+    // Compression is the client's choice; the pixels are not.
+    let (st, _, high) = call(&fresh, get(&format!("{q}&compression=high"))).await;
+    assert_eq!(st, StatusCode::OK);
+    assert_eq!(
+        image::load_from_memory(&high)
+            .unwrap()
+            .into_rgba8()
+            .into_raw(),
+        cold
+    );
+    let (st, _, body) = call(&fresh, get(&format!("{q}&compression=zip"))).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("compression"))
+    );
 }

@@ -19,6 +19,27 @@ pub struct Computed {
     pub geometry: Arc<Geometry>,
     pub map: NormalMap,
     pub f: Option<Vec<f32>>,
+    /// The map as an EXR file, encoded once: what `warp.exr` serves and `keep` writes, so
+    /// both are the same bytes and a request after the first needs no worker.
+    pub exr: std::sync::OnceLock<Vec<u8>>,
+}
+
+impl Computed {
+    /// The map's EXR bytes, stamped with the revisions of the first caller.
+    pub fn exr(&self, rig_revision: u64, tiles_revision: u64) -> crate::Result<&[u8]> {
+        if let Some(b) = self.exr.get() {
+            return Ok(b);
+        }
+        let mut attrs = self.map.attributes.clone();
+        attrs.push(("omniwarp.rig_revision".into(), rig_revision.to_string()));
+        attrs.push(("omniwarp.tiles_revision".into(), tiles_revision.to_string()));
+        let bytes = crate::image_io::exr_bytes(
+            self.map.pixels(),
+            &attrs,
+            crate::image_io::Precision::Float,
+        )?;
+        Ok(self.exr.get_or_init(|| bytes))
+    }
 }
 
 /// The daemon's GPU, if the machine has an adapter: created on first use.

@@ -6,7 +6,6 @@ use super::ApiError;
 use super::cache::{Computed, Geometry};
 use super::state::AppState;
 use super::store::Canvas;
-use crate::image_io::{Precision, atomic_write, exr_bytes};
 use crate::rig::Rig;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -116,10 +115,6 @@ async fn run_with<T: Send + 'static>(
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))?
-}
-
-pub fn warp_file(id: &str, key: u64) -> String {
-    format!("warps/{id}-{key:016x}.exr")
 }
 
 fn cancelled(cancel: &AtomicBool) -> Result<(), ApiError> {
@@ -232,12 +227,21 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
             None => (geometry.warp.map.clone(), None),
         };
         cancelled(cancel)?;
-        if let Some(dir) = &state.store.dir {
-            keep_warp(dir, &id2, key, &map, rig_revision, tiles_revision);
-        }
-        Ok(Arc::new(Computed { geometry, map, f }))
+        Ok(Arc::new(Computed {
+            geometry,
+            map,
+            f,
+            exr: Default::default(),
+        }))
     })
     .await?;
+    if let Some(dir) = s.store.dir.clone() {
+        // Kept for a restart, not needed by this request: written (32 MB of EXR for a 1080p
+        // channel, with an fsync) after the answer, by one writer that skips to the newest
+        // warp of each channel when edits come faster than it writes.
+        s.keeper
+            .keep(dir, id, key, computed.clone(), rig_revision, tiles_revision);
+    }
     {
         let mut cache = s.computed.lock().expect("cache lock");
         cache.retain(|k, _| k.0 != id);
@@ -251,50 +255,4 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
         computed,
         key,
     })
-}
-
-/// Writes the warp map under `warps/` so a restarted daemon serves it without recomputing; a
-/// failure costs only that, so it is logged, not returned.
-fn keep_warp(
-    dir: &std::path::Path,
-    id: &str,
-    key: u64,
-    map: &crate::normalmap::NormalMap,
-    rig_revision: u64,
-    tiles_revision: u64,
-) {
-    let path = dir.join(warp_file(id, key));
-    let mut attrs = map.attributes.clone();
-    attrs.push(("omniwarp.rig_revision".into(), rig_revision.to_string()));
-    attrs.push(("omniwarp.tiles_revision".into(), tiles_revision.to_string()));
-    let written = crate::image_io::create_dir_durably(&dir.join("warps"))
-        .and_then(|_| exr_bytes(map.pixels(), &attrs, Precision::Float))
-        .and_then(|bytes| {
-            atomic_write(&path, |f| {
-                std::io::Write::write_all(f, &bytes).map_err(|e| crate::Error::file(&path, e))
-            })
-        });
-    match written {
-        Ok(()) => remove_older_warps(dir, id, &path),
-        Err(e) => tracing::error!(error = %e, "could not keep the warp map"),
-    }
-}
-
-fn remove_older_warps(dir: &std::path::Path, id: &str, keep: &std::path::Path) {
-    let Ok(entries) = std::fs::read_dir(dir.join("warps")) else {
-        return;
-    };
-    let prefix = format!("{id}-");
-    for e in entries.flatten() {
-        let p = e.path();
-        let name = e.file_name().to_string_lossy().into_owned();
-        // Another channel's id may start with this one's: match the hash's length too.
-        let ours = name
-            .strip_prefix(&prefix)
-            .and_then(|rest| rest.strip_suffix(".exr"))
-            .is_some_and(|hash| hash.len() == 16 && hash.bytes().all(|b| b.is_ascii_hexdigit()));
-        if p != keep && ours {
-            let _ = std::fs::remove_file(p);
-        }
-    }
 }

@@ -14,6 +14,7 @@ mod exports;
 mod guard;
 mod history;
 mod jobs;
+mod keep;
 mod meshes;
 mod outputs;
 mod preview;

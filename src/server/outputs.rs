@@ -7,13 +7,12 @@
 //! [`WORKERS`]: super::state::WORKERS
 
 use super::ApiError;
-use super::jobs::{etag, inputs, job, job_from, run_job, warp_file};
-use super::preview::Look;
+use super::jobs::{etag, inputs, job, job_from, run_job};
+use super::keep::warp_file;
+use super::preview::{Ask, Grid, Look, Made};
 use super::state::{AppState, Query};
 use crate::content::pattern::Pattern;
-use crate::image_io::{Precision, exr_bytes, png_bytes};
-use crate::normalmap::NormalMap;
-use crate::raster::Raster;
+use crate::image_io::{Compression, Precision, exr_bytes, png_bytes_with};
 use crate::render::Filter;
 use crate::render::coverage::face_size_for;
 use crate::rig::{BlendOptions, blend_png_bytes};
@@ -24,6 +23,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::time::Instant;
 
 /// Largest preview, pixels.
 const MAX_PREVIEW: usize = 4096 * 2304;
@@ -81,17 +81,15 @@ pub async fn warp(
         }
     }
     let j = job_from(&s, &id, inputs).await?;
-    let mut attrs = j.computed.map.attributes.clone();
-    attrs.push(("omniwarp.rig_revision".into(), j.rig_revision.to_string()));
-    attrs.push((
-        "omniwarp.tiles_revision".into(),
-        j.tiles_revision.to_string(),
-    ));
-    let computed = j.computed.clone();
-    let bytes = run_job(&s, move |_| {
-        Ok(exr_bytes(computed.map.pixels(), &attrs, Precision::Float)?)
-    })
-    .await?;
+    // Encoded once per computed warp (and shared with the copy kept on disk): later requests
+    // need no worker.
+    let bytes = match j.computed.exr.get() {
+        Some(b) => b.clone(),
+        None => {
+            let (computed, r, t) = (j.computed.clone(), j.rig_revision, j.tiles_revision);
+            run_job(&s, move |_| Ok(computed.exr(r, t)?.to_vec())).await?
+        }
+    };
     file(&s, bytes, "image/x-exr", &j.etag())
 }
 
@@ -154,6 +152,9 @@ pub struct RenderQuery {
     /// `cpu` (the reference), `gpu` (wgpu; 8-bit, bilinear) or `auto`.
     #[serde(default)]
     renderer: Option<String>,
+    /// PNG compression: `fast` (default), `balanced` or `high`.
+    #[serde(default)]
+    compression: Option<String>,
 }
 
 fn invalid(field: &str, reason: impl Into<String>) -> ApiError {
@@ -214,6 +215,10 @@ pub async fn render(
             format!("must be between 8 and 2048, got {face}"),
         ));
     }
+    let compression = match q.compression.as_deref() {
+        None => Compression::Fast,
+        Some(c) => Compression::parse(c).map_err(|e| invalid("compression", e.reason()))?,
+    };
     let gpu = match q.renderer.as_deref().unwrap_or("cpu") {
         "cpu" => None,
         r @ ("gpu" | "auto") => {
@@ -249,28 +254,38 @@ pub async fn render(
         ));
     }
     let etag = j.etag();
-    let computed = j.computed.clone();
+    let (computed, key) = (j.computed.clone(), j.key);
     let state = s.clone();
-    let bytes = run_job(&s, move |cancel| {
-        // Every k-th pixel of the warp, its centre pixel per k×k block.
-        let pick =
-            |i: usize, jj: usize| ((jj * k + k / 2).min(h - 1)) * w + (i * k + k / 2).min(w - 1);
-        let src = computed.map.pixels();
-        let sub = Raster {
-            width: ow,
-            height: oh,
-            data: (0..ow * oh)
-                .map(|n| src.data[pick(n % ow, n / ow)])
-                .collect(),
+    let (bytes, made) = run_job(&s, move |cancel| {
+        let ask = Ask {
+            scale: k,
+            pattern,
+            face: q.face,
+            filter,
         };
-        let map = NormalMap::from_pixels(sub, vec![])?;
-        let weights: Vec<f32> = (0..ow * oh)
-            .map(|n| computed.geometry.weights[pick(n % ow, n / ow)])
-            .collect();
-        let f: Option<Vec<f32>> = computed
-            .f
-            .as_ref()
-            .map(|f| (0..ow * oh).map(|n| f[pick(n % ow, n / ow)]).collect());
+        if !exr && gpu.is_none() {
+            // The CPU preview: kept ready between requests, so a repeated one costs a frame
+            // and its encoding.
+            let t = Instant::now();
+            let (prepared, made) =
+                state
+                    .previews
+                    .get(&id, ask, key, &computed, &state.pattern_cubes, cancel)?;
+            let ready = t.elapsed();
+            let img = prepared.frame()?;
+            let framed = t.elapsed();
+            let png = png_bytes_with(&img, compression)?;
+            let timing = [
+                ("prepare", ready),
+                ("frame", framed - ready),
+                ("encode", t.elapsed() - framed),
+            ];
+            return Ok((png, Some((made, timing))));
+        }
+        let grid = Grid::new(w, h, k);
+        let map = grid.map(&computed.map)?;
+        let weights = grid.values(&computed.geometry.weights);
+        let f = computed.f.as_ref().map(|f| grid.values(f));
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled.into());
         }
@@ -288,21 +303,41 @@ pub async fn render(
         if exr {
             let cube = look.cube::<[f32; 4]>([true; 6], 1.0);
             let img = look.render(&cube, &map, &weights, f.as_deref(), 1.0)?;
-            return Ok(exr_bytes(&img, &[], Precision::Float)?);
+            return Ok((exr_bytes(&img, &[], Precision::Float)?, None));
         }
         let cube = state.pattern_cubes.get(&look, &map);
-        let img = match &gpu {
-            Some(g) => look.render_gpu(g, &cube, &map, &weights, f.as_deref())?,
-            None => look.render(&cube, &map, &weights, f.as_deref(), 2.2)?,
-        };
-        let encoded = png_bytes(&img);
-        Ok(encoded?)
+        let g = gpu.as_ref().expect("the CPU's PNG previews returned above");
+        let img = look.render_gpu(g, &cube.cube, &map, &weights, f.as_deref())?;
+        Ok((png_bytes_with(&img, compression)?, None))
     })
     .await?;
-    file(
+    let mut resp = file(
         &s,
         bytes,
         if exr { "image/x-exr" } else { "image/png" },
         &etag,
-    )
+    )?;
+    if let Some((made, timing)) = made {
+        // How the preview was made ready, and where its time went (Server-Timing, which
+        // browsers' developer tools show).
+        let how = match made {
+            Made::Kept => "kept".to_string(),
+            Made::Rebuilt(rows) => format!("rows {}-{}", rows.start, rows.end),
+            Made::Built => "built".to_string(),
+        };
+        let timing: Vec<String> = timing
+            .iter()
+            .map(|(name, d)| format!("{name};dur={:.2}", d.as_secs_f64() * 1e3))
+            .collect();
+        let h = resp.headers_mut();
+        for (name, value) in [
+            ("x-omniwarp-preview", how),
+            ("server-timing", timing.join(", ")),
+        ] {
+            if let Ok(v) = value.parse() {
+                h.insert(name, v);
+            }
+        }
+    }
+    Ok(resp)
 }

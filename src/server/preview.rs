@@ -1,14 +1,17 @@
 //! Previews: the procedural test pattern through a channel's warp, desaturated by its tiles'
 //! f and attenuated by its blend, on the CPU or the GPU.
 
-use super::cache::GpuWarp;
+use super::cache::{Computed, GpuWarp};
 use crate::content::Content;
 use crate::content::pattern::Pattern;
 use crate::cubemap::CubeMap;
 use crate::normalmap::NormalMap;
 use crate::raster::{Pixel, Raster};
-use crate::render::{self, Filter, Warp};
-use std::sync::{Arc, Mutex};
+use crate::render::coverage::{face_size_for, faces_sampled};
+use crate::render::{self, Filter, Plan, Warp};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Multiplies colour by the blend weight raised to 1/γ (γ = 1: linear output).
 fn attenuate<T: Pixel>(img: &mut Raster<T>, weights: &[f32], gamma: f64) {
@@ -29,38 +32,327 @@ pub struct Look {
 /// Cubes of the procedural content kept between previews, by pattern and face size: a fine
 /// cube (faces of 2048) costs a second to evaluate and never changes.
 #[derive(Default)]
-pub struct PatternCubes(Mutex<Vec<Kept>>);
+pub struct PatternCubes(Mutex<Vec<Arc<PatternCube>>>);
 
-/// A kept cube: its pattern, face size, texels and which faces are evaluated.
-type Kept = (Pattern, usize, Arc<CubeMap<[u8; 4]>>, [bool; 6]);
+/// A kept cube: its pattern, face size, texels, which faces are evaluated, and the atlas the
+/// CPU renderer reads (made on first use: GPU previews upload the cube itself).
+pub struct PatternCube {
+    pattern: Pattern,
+    face: usize,
+    faces: [bool; 6],
+    pub cube: CubeMap<[u8; 4]>,
+    content: OnceLock<Content<[u8; 4]>>,
+}
 
-/// How many cubes are kept (each at most six 2048² faces of 8-bit RGBA, 100 MB).
+impl PatternCube {
+    pub fn content(&self) -> &Content<[u8; 4]> {
+        self.content.get_or_init(|| Content::cube(&self.cube))
+    }
+}
+
+/// How many cubes are kept (each at most six 2048² faces of 8-bit RGBA, 100 MB, and its atlas
+/// as much again).
 const KEPT: usize = 2;
 
 impl PatternCubes {
     /// The 8-bit cube of `look` with at least the faces `map` samples evaluated.
-    pub fn get(&self, look: &Look, map: &NormalMap) -> Arc<CubeMap<[u8; 4]>> {
+    pub fn get(&self, look: &Look, map: &NormalMap) -> Arc<PatternCube> {
         let need = crate::render::coverage::faces_sampled(map, look.face as u32);
         let mut on = need;
         {
             let kept = self.0.lock().expect("pattern cube lock");
-            if let Some((_, _, cube, has)) = kept
+            if let Some(c) = kept
                 .iter()
-                .find(|(p, f, _, _)| *p == look.pattern && *f == look.face)
+                .find(|c| c.pattern == look.pattern && c.face == look.face)
             {
-                if (0..6).all(|i| has[i] || !need[i]) {
-                    return cube.clone();
+                if (0..6).all(|i| c.faces[i] || !need[i]) {
+                    return c.clone();
                 }
-                on = std::array::from_fn(|i| has[i] || need[i]);
+                on = std::array::from_fn(|i| c.faces[i] || need[i]);
             }
         }
-        let cube = Arc::new(look.cube::<[u8; 4]>(on, 255.0));
+        let cube = Arc::new(PatternCube {
+            pattern: look.pattern,
+            face: look.face,
+            faces: on,
+            cube: look.cube::<[u8; 4]>(on, 255.0),
+            content: OnceLock::new(),
+        });
         let mut kept = self.0.lock().expect("pattern cube lock");
-        kept.retain(|(p, f, _, _)| !(*p == look.pattern && *f == look.face));
-        kept.push((look.pattern, look.face, cube.clone(), on));
+        kept.retain(|c| !(c.pattern == look.pattern && c.face == look.face));
+        kept.push(cube.clone());
         let excess = kept.len().saturating_sub(KEPT);
         kept.drain(..excess);
         cube
+    }
+}
+
+/// What a preview request asks for besides the channel: equal asks of an unchanged channel
+/// give the same picture.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ask {
+    pub scale: usize,
+    pub pattern: Pattern,
+    /// The cube's face size, or `None` to match it to the preview's pixels.
+    pub face: Option<usize>,
+    pub filter: Filter,
+}
+
+/// Which pixels of a channel's warp a preview shows: the centre pixel of each k × k block.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Grid {
+    pub w: usize,
+    pub h: usize,
+    pub k: usize,
+    pub ow: usize,
+    pub oh: usize,
+}
+
+impl Grid {
+    pub fn new(w: usize, h: usize, k: usize) -> Grid {
+        Grid {
+            w,
+            h,
+            k,
+            ow: w.div_ceil(k),
+            oh: h.div_ceil(k),
+        }
+    }
+
+    #[inline]
+    fn pick(&self, i: usize, j: usize) -> usize {
+        let k = self.k;
+        ((j * k + k / 2).min(self.h - 1)) * self.w + (i * k + k / 2).min(self.w - 1)
+    }
+
+    /// The picked values of a per-pixel array of the channel.
+    pub fn values<T: Copy + Send + Sync>(&self, full: &[T]) -> Vec<T> {
+        let mut out = Vec::with_capacity(self.ow * self.oh);
+        for j in 0..self.oh {
+            out.extend((0..self.ow).map(|i| full[self.pick(i, j)]));
+        }
+        out
+    }
+
+    pub fn map(&self, full: &NormalMap) -> crate::Result<NormalMap> {
+        let data = self.values(&full.pixels().data);
+        NormalMap::from_pixels(
+            Raster {
+                width: self.ow,
+                height: self.oh,
+                data,
+            },
+            vec![],
+        )
+    }
+
+    /// The preview rows whose picked pixels differ between two maps of the channel.
+    fn changed(&self, a: &NormalMap, b: &NormalMap) -> std::ops::Range<usize> {
+        let (a, b) = (&a.pixels().data, &b.pixels().data);
+        let differs = |j: usize| (0..self.ow).any(|i| a[self.pick(i, j)] != b[self.pick(i, j)]);
+        match (0..self.oh).find(|&j| differs(j)) {
+            None => 0..0,
+            Some(first) => {
+                first
+                    ..(first..self.oh)
+                        .rev()
+                        .find(|&j| differs(j))
+                        .unwrap_or(first)
+                        + 1
+            }
+        }
+    }
+}
+
+/// A CPU preview ready to render again: everything but the frame. Kept per channel and ask;
+/// after a tile edit the plan is rebuilt only in the rows whose warp changed.
+pub struct Prepared {
+    id: String,
+    ask: Ask,
+    key: u64,
+    computed: Arc<Computed>,
+    grid: Grid,
+    cube: Arc<PatternCube>,
+    plan: Plan,
+    /// The blend weight raised to 1/2.2 (PNG previews are in signal space), per pixel.
+    gain: Arc<Vec<f32>>,
+    f: Option<Vec<f32>>,
+}
+
+impl Prepared {
+    /// Renders the preview: the plan's frame, desaturated by the tiles' f and attenuated by the
+    /// blend, as [`Look::render`] does.
+    pub fn frame(&self) -> crate::Result<Raster<[u8; 4]>> {
+        let mut img = self.plan.render(self.cube.content().atlas())?;
+        if let Some(f) = &self.f {
+            crate::tiles::raster::saturation(&mut img, f);
+        }
+        img.data
+            .par_iter_mut()
+            .zip(self.gain.par_iter())
+            // Outside the blend zones the gain is 1 (and the pixel stays as it is).
+            .filter(|(_, m)| **m != 1.0)
+            .for_each(|(p, &m)| {
+                let v = p.to_f32();
+                *p = <[u8; 4]>::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
+            });
+        Ok(img)
+    }
+}
+
+/// How many prepared previews are kept (a 1080p one holds about 40 MB).
+const PREPARED: usize = 4;
+
+/// Prepared previews, most recent last.
+#[derive(Default)]
+pub struct Previews(Mutex<Vec<Arc<Prepared>>>);
+
+/// How a preview was made ready, for the `X-Omniwarp-Preview` header and the tests.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Made {
+    /// Kept from an earlier request with the same inputs.
+    Kept,
+    /// From an earlier preview of the channel, its plan rebuilt in these rows.
+    Rebuilt(std::ops::Range<usize>),
+    /// From nothing.
+    Built,
+}
+
+impl Previews {
+    /// The prepared preview of channel `id` for `ask`, given its computed warp (and that
+    /// warp's input hash `key`).
+    pub fn get(
+        &self,
+        id: &str,
+        ask: Ask,
+        key: u64,
+        computed: &Arc<Computed>,
+        cubes: &PatternCubes,
+        cancel: &AtomicBool,
+    ) -> crate::Result<(Arc<Prepared>, Made)> {
+        let (kept, base) = {
+            let all = self.0.lock().expect("preview lock");
+            let same = |p: &&Arc<Prepared>| p.id == id && p.ask == ask;
+            (
+                all.iter().filter(same).find(|p| p.key == key).cloned(),
+                all.iter().rev().find(same).cloned(),
+            )
+        };
+        if let Some(p) = kept {
+            return Ok((p, Made::Kept));
+        }
+        let full = &computed.map;
+        let grid = Grid::new(full.width(), full.height(), ask.scale);
+        // At full scale the preview reads the channel's map itself.
+        let sub;
+        let map = if ask.scale == 1 {
+            full
+        } else {
+            sub = grid.map(full)?;
+            &sub
+        };
+        let stop = || {
+            if cancel.load(Ordering::Relaxed) {
+                Err(crate::Error::Cancelled)
+            } else {
+                Ok(())
+            }
+        };
+        stop()?;
+        let face = ask
+            .face
+            .unwrap_or_else(|| face_size_for(map, 2048) as usize);
+        let look = Look {
+            pattern: ask.pattern,
+            face,
+            filter: ask.filter,
+        };
+        let gain = |c: &Computed| {
+            Arc::new(
+                grid.values(&c.geometry.weights)
+                    .iter()
+                    .map(|&k| f64::from(k).powf(1.0 / 2.2) as f32)
+                    .collect::<Vec<_>>(),
+            )
+        };
+        let f = computed.f.as_ref().map(|f| grid.values(f));
+        // An earlier preview of this channel and ask, another warp: keep what still holds.
+        let reuse = base.filter(|b| b.grid == grid && b.cube.face == face);
+        let made = match reuse {
+            Some(b) => {
+                let changed = grid.changed(&b.computed.map, full);
+                let need = if changed.is_empty() {
+                    [false; 6]
+                } else {
+                    faces_sampled(&Grid::rows(map, changed.clone())?, face as u32)
+                };
+                if (0..6).all(|i| b.cube.faces[i] || !need[i]) {
+                    let mut plan = b.plan.clone();
+                    let content = b.cube.content();
+                    let rows = plan.redo(Warp::Map(map), content, content.atlas(), changed)?;
+                    let gain = if Arc::ptr_eq(&b.computed.geometry, &computed.geometry) {
+                        b.gain.clone()
+                    } else {
+                        gain(computed)
+                    };
+                    Some((plan, b.cube.clone(), gain, Made::Rebuilt(rows)))
+                } else {
+                    None
+                }
+            }
+            None => None,
+        };
+        let (plan, cube, gain, made) = match made {
+            Some(m) => m,
+            None => {
+                let cube = cubes.get(&look, map);
+                stop()?;
+                let content = cube.content();
+                let (w, h) = (grid.ow as u32, grid.oh as u32);
+                let plan = Plan::new(
+                    Warp::Map(map),
+                    content,
+                    content.atlas(),
+                    w,
+                    h,
+                    1,
+                    ask.filter,
+                )?;
+                (plan, cube, gain(computed), Made::Built)
+            }
+        };
+        let prepared = Arc::new(Prepared {
+            id: id.to_string(),
+            ask,
+            key,
+            computed: computed.clone(),
+            grid,
+            cube,
+            plan,
+            gain,
+            f,
+        });
+        let mut all = self.0.lock().expect("preview lock");
+        all.retain(|p| !(p.id == id && p.ask == ask));
+        all.push(prepared.clone());
+        let excess = all.len().saturating_sub(PREPARED);
+        all.drain(..excess);
+        Ok((prepared, made))
+    }
+}
+
+impl Grid {
+    /// Rows `rows` of a map, as a map of their own.
+    fn rows(map: &NormalMap, rows: std::ops::Range<usize>) -> crate::Result<NormalMap> {
+        let w = map.width();
+        NormalMap::from_pixels(
+            Raster {
+                width: w,
+                height: rows.len(),
+                data: map.pixels().data[rows.start * w..rows.end * w].to_vec(),
+            },
+            vec![],
+        )
     }
 }
 

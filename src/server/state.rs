@@ -83,6 +83,10 @@ pub struct AppState {
     pub gpu: std::sync::OnceLock<Option<Arc<GpuWarp>>>,
     /// The previews' procedural content, evaluated once per pattern and face size.
     pub pattern_cubes: super::preview::PatternCubes,
+    /// CPU previews ready to render again.
+    pub previews: super::preview::Previews,
+    /// Writes computed warps to disk after the requests that computed them.
+    pub keeper: super::keep::Keeper,
 }
 
 impl AppState {
@@ -111,6 +115,8 @@ impl AppState {
             jobs_cancelled: AtomicU64::new(0),
             gpu: std::sync::OnceLock::new(),
             pattern_cubes: Default::default(),
+            previews: Default::default(),
+            keeper: Default::default(),
         })
     }
 

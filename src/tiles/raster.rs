@@ -196,12 +196,16 @@ impl FeatureMap {
     /// Leaves only the pixels `mask` also covers: a channel's tiles are cut where the
     /// projector's light leaves the wall, which the tile grid only approximates.
     pub fn cut_by(&mut self, mask: &NormalMap) {
-        let w = self.width;
-        self.data.par_iter_mut().enumerate().for_each(|(n, p)| {
-            if mask.direction(n % w, n / w).is_none() {
-                *p = None;
-            }
-        });
+        self.data
+            .par_chunks_mut(self.width)
+            .enumerate()
+            .for_each(|(j, row)| {
+                for (i, p) in row.iter_mut().enumerate() {
+                    if !mask.covers(i, j) {
+                        *p = None;
+                    }
+                }
+            });
     }
 
     /// The normal map: N = f_normal(φ, θ, scale) where a tile covers the pixel.
@@ -225,7 +229,7 @@ impl FeatureMap {
     /// The custom value f per pixel (1 where nothing is covered).
     pub fn f(&self) -> Vec<f32> {
         self.data
-            .iter()
+            .par_iter()
             .map(|p| p.map_or(1.0, |(_, f)| f as f32))
             .collect()
     }
@@ -236,6 +240,9 @@ pub fn saturation<T: crate::raster::Pixel>(img: &mut Raster<T>, f: &[f32]) {
     img.data
         .par_iter_mut()
         .zip(f.par_iter())
+        // At full saturation (f ≥ 1, clamped) a pixel stays as it is: y + (r − y) is r to
+        // within an ulp, which rounds back to r in 8 bits (and float pixels keep r itself).
+        .filter(|(_, s)| **s < 1.0)
         .for_each(|(p, &s)| {
             let [r, g, b, a] = p.to_f32();
             // Rec. 709 luma: the grey a desaturated pixel falls to.

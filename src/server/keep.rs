@@ -1,0 +1,125 @@
+//! Computed warps kept on disk (`warps/<id>-<hash>.exr`) so a restarted daemon serves them
+//! without recomputing: written after the answer that computed them, by one thread.
+
+use super::cache::Computed;
+use crate::image_io::atomic_write;
+use std::sync::{Arc, Condvar, Mutex, Once};
+
+/// Where a channel's warp computed from inputs with hash `key` is kept.
+pub fn warp_file(id: &str, key: u64) -> String {
+    format!("warps/{id}-{key:016x}.exr")
+}
+
+/// Writes computed warps to disk in the background, one at a time, the newest per channel.
+pub struct Keeper {
+    pending: Arc<(Mutex<Vec<Keep>>, Condvar)>,
+    started: Once,
+}
+
+/// One warp to keep.
+struct Keep {
+    dir: std::path::PathBuf,
+    id: String,
+    key: u64,
+    computed: Arc<Computed>,
+    revisions: (u64, u64),
+}
+
+impl Default for Keeper {
+    fn default() -> Self {
+        Keeper {
+            pending: Arc::new((Mutex::new(Vec::new()), Condvar::new())),
+            started: Once::new(),
+        }
+    }
+}
+
+impl Keeper {
+    pub fn keep(
+        &self,
+        dir: std::path::PathBuf,
+        id: &str,
+        key: u64,
+        computed: Arc<Computed>,
+        rig_revision: u64,
+        tiles_revision: u64,
+    ) {
+        let pending = self.pending.clone();
+        self.started.call_once(|| {
+            let pending = pending.clone();
+            let spawned = std::thread::Builder::new()
+                .name("keep-warps".into())
+                .spawn(move || {
+                    loop {
+                        let next = {
+                            let (lock, ready) = &*pending;
+                            let mut queue = lock.lock().expect("keeper lock");
+                            while queue.is_empty() {
+                                queue = ready.wait(queue).expect("keeper lock");
+                            }
+                            queue.remove(0)
+                        };
+                        let (r, t) = next.revisions;
+                        keep_warp(&next.dir, &next.id, next.key, &next.computed, r, t);
+                    }
+                });
+            if let Err(e) = spawned {
+                tracing::error!(error = %e, "no thread to keep warps with");
+            }
+        });
+        let (lock, ready) = &*self.pending;
+        let mut queue = lock.lock().expect("keeper lock");
+        queue.retain(|k| k.id != id);
+        queue.push(Keep {
+            dir,
+            id: id.to_string(),
+            key,
+            computed,
+            revisions: (rig_revision, tiles_revision),
+        });
+        ready.notify_one();
+    }
+}
+
+/// Writes the warp map under `warps/` so a restarted daemon serves it without recomputing; a
+/// failure costs only that, so it is logged, not returned.
+fn keep_warp(
+    dir: &std::path::Path,
+    id: &str,
+    key: u64,
+    computed: &Computed,
+    rig_revision: u64,
+    tiles_revision: u64,
+) {
+    let path = dir.join(warp_file(id, key));
+    let written = crate::image_io::create_dir_durably(&dir.join("warps"))
+        .and_then(|_| computed.exr(rig_revision, tiles_revision))
+        .and_then(|bytes| {
+            atomic_write(&path, |f| {
+                std::io::Write::write_all(f, bytes).map_err(|e| crate::Error::file(&path, e))
+            })
+        });
+    match written {
+        Ok(()) => remove_older_warps(dir, id, &path),
+        Err(e) => tracing::error!(error = %e, "could not keep the warp map"),
+    }
+}
+
+fn remove_older_warps(dir: &std::path::Path, id: &str, keep: &std::path::Path) {
+    let Ok(entries) = std::fs::read_dir(dir.join("warps")) else {
+        return;
+    };
+    let prefix = format!("{id}-");
+    for e in entries.flatten() {
+        let p = e.path();
+        let name = e.file_name().to_string_lossy().into_owned();
+        // Another channel's id may start with this one's: match the hash's length too.
+        let ours = name
+            .strip_prefix(&prefix)
+            .and_then(|rest| rest.strip_suffix(".exr"))
+            .is_some_and(|hash| hash.len() == 16 && hash.bytes().all(|b| b.is_ascii_hexdigit()));
+        if p != keep && ours {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+}
