@@ -336,6 +336,18 @@ impl Lens {
                     DVec3::new(u * s, v * s, theta.cos())
                 }
             }
+            LensModel::OpenCv(n) if n <= 12 => {
+                // Closed-form Newton from the neighbour's answer (or the undistorted point);
+                // the general solver where it gives up.
+                let start = guess
+                    .filter(|g| g.z > 0.0)
+                    .map_or([u, v], |g| [g.x / g.z, g.y / g.z]);
+                let core = [i[0], i[1], i[2], i[3]];
+                match opencv::undistort(core, &i[4..], q, start, self.fold) {
+                    Some([x, y]) => DVec3::new(x, y, 1.0).normalize(),
+                    None => solve::unproject(self, q, guess)?,
+                }
+            }
             LensModel::OpenCv(_) | LensModel::Cahvor | LensModel::SplinedStereographic { .. } => {
                 solve::unproject(self, q, guess)?
             }

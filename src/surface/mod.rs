@@ -19,6 +19,10 @@ use serde::{Deserialize, Serialize};
 /// Hits arriving closer than this to the tangent plane count as grazing.
 pub const GRAZING_DEG: f64 = 89.0;
 
+/// sin(90° − GRAZING_DEG): the cosine of incidence below which a hit grazes. Written out
+/// because `sin` is not a const fn and classifying every pixel's hit called it.
+const GRAZING_COS: f64 = 0.017_452_406_437_283_51;
+
 /// Rays start this far in front of their origin, so a point on the surface does not hit itself.
 const EPS: f64 = 1e-9;
 
@@ -53,7 +57,7 @@ fn classify(origin: DVec3, dir: DVec3, t: f64, n: DVec3) -> Hit {
     let point = origin + dir * t;
     let n = if n.dot(dir) > 0.0 { -n } else { n };
     let cos = -n.dot(dir);
-    if cos < (90.0 - GRAZING_DEG).to_radians().sin() {
+    if cos < GRAZING_COS {
         Hit::Grazing { point }
     } else {
         Hit::Lit {
@@ -192,3 +196,12 @@ pub fn unit(field: &str, v: DVec3) -> Result<DVec3> {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod grazing {
+    #[test]
+    fn the_written_out_cosine_is_the_grazing_angle() {
+        let exact = (90.0 - super::GRAZING_DEG).to_radians().sin();
+        assert!((super::GRAZING_COS - exact).abs() < 1e-17, "{exact}");
+    }
+}
