@@ -271,6 +271,20 @@ impl<const N: usize> Grid<N> {
         height: usize,
         scale: [f64; N],
     ) -> f64 {
+        self.error_within(field, width, height, scale, f64::INFINITY)
+            .unwrap_or(f64::INFINITY)
+    }
+
+    /// [`Grid::max_error`] if it is at most `limit`, else `None` as soon as one pixel shows
+    /// more: a grid the tolerance search rejects costs a few rows, not the whole image.
+    pub fn error_within(
+        &self,
+        field: &[Option<[f64; N]>],
+        width: usize,
+        height: usize,
+        scale: [f64; N],
+        limit: f64,
+    ) -> Option<f64> {
         let ways: &[Cells] = match self.reading.cells {
             Cells::Any => &[
                 Cells::Bilinear,
@@ -279,16 +293,21 @@ impl<const N: usize> Grid<N> {
             ],
             one => &[one],
         };
-        (0..height)
+        let over = AtomicBool::new(false);
+        let worst = (0..height)
             .into_par_iter()
             .map(|j| {
                 let mut worst = 0.0f64;
+                if over.load(Ordering::Relaxed) {
+                    return worst;
+                }
                 for i in 0..width {
                     let Some(exact) = field[j * width + i] else {
                         continue;
                     };
                     for cells in ways {
                         let Some(got) = self.at_pixel(i, j, width, height, *cells) else {
+                            over.store(true, Ordering::Relaxed);
                             return f64::INFINITY;
                         };
                         let d2: f64 = (0..N)
@@ -296,10 +315,15 @@ impl<const N: usize> Grid<N> {
                             .sum();
                         worst = worst.max(d2.sqrt());
                     }
+                    if worst > limit {
+                        over.store(true, Ordering::Relaxed);
+                        return worst;
+                    }
                 }
                 worst
             })
-            .reduce(|| 0.0, f64::max)
+            .reduce(|| 0.0, f64::max);
+        (!over.load(Ordering::Relaxed) && worst <= limit).then_some(worst)
     }
 }
 
@@ -330,33 +354,40 @@ pub fn choose<const N: usize>(
         c.checked_mul(r)
             .is_some_and(|n| n <= crate::limits::EXPORT_NODES)
     };
-    let try_grid = |columns: usize, rows: usize| {
+    let cancelled = || {
         if cancel.load(Ordering::Relaxed) {
-            return Err(crate::Error::Cancelled);
+            Err(crate::Error::Cancelled)
+        } else {
+            Ok(())
         }
-        let grid = sample(field, width, height, columns, rows, reading);
+    };
+    // Grids the tolerance rejects are measured only until they fail; the one returned is
+    // measured in full.
+    let measured = |grid: Grid<N>| {
         let max_error = grid.max_error(field, width, height, scale);
-        Ok(Chosen { grid, max_error })
+        Chosen { grid, max_error }
     };
     let mut columns = 2usize;
-    let mut finest: Option<Chosen<N>> = None;
+    let mut finest: Option<Grid<N>> = None;
     while columns < width {
         let rows = ((columns as f64 * height as f64 / width as f64).round() as usize).max(2);
         if !fits(columns, rows) {
             break;
         }
-        let c = try_grid(columns, rows)?;
-        if c.max_error <= tolerance {
-            return Ok(c);
+        cancelled()?;
+        let grid = sample(field, width, height, columns, rows, reading);
+        if let Some(max_error) = grid.error_within(field, width, height, scale, tolerance) {
+            return Ok(Chosen { grid, max_error });
         }
-        finest = Some(c);
+        finest = Some(grid);
         columns = ((columns as f64 * std::f64::consts::SQRT_2).ceil() as usize).max(columns + 1);
     }
     let (columns, rows) = reading.layout.exact(width, height);
-    match finest {
-        Some(c) if !fits(columns, rows) => Ok(c),
-        _ => try_grid(columns, rows),
-    }
+    cancelled()?;
+    Ok(match finest {
+        Some(g) if !fits(columns, rows) => measured(g),
+        _ => measured(sample(field, width, height, columns, rows, reading)),
+    })
 }
 
 #[cfg(test)]
@@ -483,5 +514,30 @@ mod tests {
             coarsest[3] >= coarsest[..3].iter().copied().max().unwrap(),
             "{coarsest:?}"
         );
+    }
+
+    /// The tolerance search stops measuring a grid once it fails; what it reports and chooses
+    /// must be what measuring every pixel gives.
+    #[test]
+    fn measuring_until_a_grid_fails_agrees_with_measuring_it_all() {
+        let (w, h) = (120, 80);
+        let f = field(w, h);
+        for (columns, rows) in [(2, 2), (5, 4), (9, 6), (30, 20), (120, 80)] {
+            let g = sample(&f, w, h, columns, rows, Reading::BILINEAR);
+            let full = g.max_error(&f, w, h, [1.0, 1.0]);
+            for limit in [full * 0.5, full, full * 2.0] {
+                assert_eq!(
+                    g.error_within(&f, w, h, [1.0, 1.0], limit),
+                    (full <= limit).then_some(full),
+                    "{columns}×{rows} against {limit}"
+                );
+            }
+        }
+        let cancel = AtomicBool::new(false);
+        for tolerance in [0.05, 0.5, 5.0] {
+            let c = choose(&f, w, h, tolerance, [1.0, 1.0], Reading::BILINEAR, &cancel).unwrap();
+            assert_eq!(c.max_error, c.grid.max_error(&f, w, h, [1.0, 1.0]));
+            assert!(c.max_error <= tolerance, "{tolerance}: {}", c.max_error);
+        }
     }
 }
