@@ -127,6 +127,16 @@ fn cmf_draws_exactly_the_faces_the_warp_samples() {
         // And each drawn face is needed: the sampled set from the normal map is the same.
         let map = NormalMap::from_view(&v, size.0, size.1).unwrap();
         assert_eq!(faces_sampled(&map, 128), report.faces, "{name}");
+        // The CPU reference casts the same faces (so `bench gpu` compares equal work), and
+        // its output does not change either.
+        let mut c = SceneRenderer::new(city.clone(), Renderer::Cpu, None).unwrap();
+        let (cpu_culled, cpu) = c.frame(&v, &opts(size, Some(128), true, eye)).unwrap();
+        assert_eq!(cpu.faces, report.faces, "{name}: faces the CPU casts");
+        let (cpu_all, _) = c.frame(&v, &opts(size, Some(128), false, eye)).unwrap();
+        assert!(
+            cpu_culled.data == cpu_all.data,
+            "{name}: CMF changed the CPU output"
+        );
     }
 }
 

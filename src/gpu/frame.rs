@@ -50,8 +50,8 @@ enum Backend {
     },
 }
 
-/// The CPU's cube map and the (eye, face size) it shows.
-type CpuCube = (([f32; 3], u32), CubeMap<[u8; 4]>);
+/// The CPU's cube map and the (eye, face size, faces cast) it shows.
+type CpuCube = (([f32; 3], u32, [bool; 6]), CubeMap<[u8; 4]>);
 
 /// Face size and faces decided for a view (they change only with the view).
 type Plan = (Vec<u8>, Option<u32>, bool, (u32, [bool; 6]));
@@ -184,10 +184,11 @@ impl SceneRenderer {
                 ))
             }
             Backend::Cpu { caster, cached } => {
-                let key = (o.eye.as_vec3().to_array(), face);
+                // Only the faces the view samples are cast, as the GPU renders only those.
+                let key = (o.eye.as_vec3().to_array(), face, faces);
                 let updated = cached.as_ref().is_none_or(|c| c.0 != key);
                 if updated {
-                    *cached = Some((key, caster.cube(o.eye, face as usize)));
+                    *cached = Some((key, caster.cube(o.eye, face as usize, faces)));
                 }
                 let cube = &cached.as_ref().expect("set above").1;
                 let mut img = render::render(
@@ -205,7 +206,7 @@ impl SceneRenderer {
                     img,
                     FrameReport {
                         face,
-                        faces: [true; 6],
+                        faces,
                         cube_updated: updated,
                     },
                 ))

@@ -16,9 +16,9 @@ pub struct RayCaster {
 impl RayCaster {
     /// The scene seen from `eye` as a cube map (the CPU's cube-map pass): the colour of the
     /// first triangle met, shaded as the GPU shades it, else the sky.
-    pub fn cube(&self, eye: DVec3, face: usize) -> CubeMap<[u8; 4]> {
+    pub fn cube(&self, eye: DVec3, face: usize, on: [bool; 6]) -> CubeMap<[u8; 4]> {
         let sun = sun().as_dvec3();
-        CubeMap::from_fn(face, 1, |d| match self.mesh.first_hit(eye, d) {
+        CubeMap::from_fn_on(face, 1, on, |d| match self.mesh.first_hit(eye, d) {
             None => SKY,
             Some((_, k, n)) => {
                 let c = self.colors[k as usize];
