@@ -2,7 +2,8 @@
 //! (PNG or EXR). The expensive work runs off the async runtime, at most [`WORKERS`] jobs at
 //! once (more get 503 with `Retry-After`), is given up when the client goes away, and is cached
 //! by a hash of its inputs. Each computed warp map is also written under the data directory
-//! (`warps/<id>-<hash>.exr`) and served from there after a restart.
+//! (`warps/<id>-<hash>.exr`, by `keep` after the answer) and served from there after a restart.
+//! CPU previews are kept ready per channel (`preview::Previews`).
 //!
 //! [`WORKERS`]: super::state::WORKERS
 
