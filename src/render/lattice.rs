@@ -112,7 +112,7 @@ pub(crate) struct Sampler<'a, L: Locate> {
     width: u32,
     height: u32,
     k: u32,
-    /// Samples per row and per column (output size × supersampling).
+    /// Samples per row (output width × supersampling).
     sw: usize,
     /// Exact positions at the lattice nodes, row by row; empty when the image is too small
     /// for a lattice (then every sample is exact).
@@ -129,9 +129,9 @@ pub(crate) struct Sampler<'a, L: Locate> {
 }
 
 impl<'a, L: Locate> Sampler<'a, L> {
-    /// A sampler for sample rows `window` of the image (all of it: `0..usize::MAX`): only the
-    /// lattice those rows read is computed, and their positions are those a sampler of the whole
-    /// image gives.
+    /// A sampler for sample rows `window` of the image (`0..height × k` for all of it): only
+    /// the lattice those rows read is computed, and their positions are those a sampler of the
+    /// whole image gives.
     pub(crate) fn new(
         warp: Warp<'a>,
         content: &'a L,

@@ -150,16 +150,11 @@ impl Grid {
     fn changed(&self, a: &NormalMap, b: &NormalMap) -> std::ops::Range<usize> {
         let (a, b) = (&a.pixels().data, &b.pixels().data);
         let differs = |j: usize| (0..self.ow).any(|i| a[self.pick(i, j)] != b[self.pick(i, j)]);
-        match (0..self.oh).find(|&j| differs(j)) {
-            None => 0..0,
-            Some(first) => {
-                first
-                    ..(first..self.oh)
-                        .rev()
-                        .find(|&j| differs(j))
-                        .unwrap_or(first)
-                        + 1
-            }
+        let first = (0..self.oh).find(|&j| differs(j));
+        let last = (0..self.oh).rev().find(|&j| differs(j));
+        match (first, last) {
+            (Some(first), Some(last)) => first..last + 1,
+            _ => 0..0,
         }
     }
 }
