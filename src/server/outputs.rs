@@ -10,12 +10,11 @@
 use super::ApiError;
 use super::jobs::{etag, inputs, job, job_from, run_job};
 use super::keep::warp_file;
-use super::preview::{Ask, Grid, Look, Made};
+use super::preview::{Ask, Grid, Look, Made, default_face};
 use super::state::{AppState, Query};
 use crate::content::pattern::Pattern;
 use crate::image_io::{Compression, Precision, exr_bytes, png_bytes_with};
 use crate::render::Filter;
-use crate::render::coverage::face_size_for;
 use crate::rig::{BlendOptions, blend_png_bytes};
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
@@ -290,12 +289,7 @@ pub async fn render(
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled.into());
         }
-        // By default the cube's texels are as fine as the preview's finest pixels, so the
-        // pattern's edges show the warp, not the cube's stair steps; 32-bit previews stop at
-        // 1024 (six such faces are 100 MB, as six 8-bit faces of 2048 are).
-        let face = q
-            .face
-            .unwrap_or_else(|| face_size_for(&map, if exr { 1024 } else { 2048 }) as usize);
+        let face = q.face.unwrap_or_else(|| default_face(&map, exr));
         let look = Look {
             pattern,
             face,

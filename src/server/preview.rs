@@ -13,13 +13,32 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// Multiplies colour by the blend weight raised to 1/γ (γ = 1: linear output).
-fn attenuate<T: Pixel>(img: &mut Raster<T>, weights: &[f32], gamma: f64) {
-    for (p, &k) in img.data.iter_mut().zip(weights) {
-        let m = f64::from(k).powf(1.0 / gamma) as f32;
-        let v = p.to_f32();
-        *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
-    }
+/// The blend weights raised to 1/γ: what colour is multiplied by (γ = 1: linear output).
+fn gains(weights: &[f32], gamma: f64) -> Vec<f32> {
+    weights
+        .par_iter()
+        .map(|&k| f64::from(k).powf(1.0 / gamma) as f32)
+        .collect()
+}
+
+/// Multiplies each pixel's colour by its gain.
+fn apply_gains<T: Pixel>(img: &mut Raster<T>, gains: &[f32]) {
+    img.data
+        .par_iter_mut()
+        .zip(gains.par_iter())
+        // Outside the blend zones the gain is 1 (and the pixel stays as it is).
+        .filter(|(_, m)| **m != 1.0)
+        .for_each(|(p, &m)| {
+            let v = p.to_f32();
+            *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
+        });
+}
+
+/// The cube face size a preview uses unless asked for one: texels as fine as the preview's
+/// finest pixels, so the pattern's edges show the warp, not the cube's stair steps; 32-bit
+/// previews stop at 1024 (six such faces are 100 MB, as six 8-bit faces of 2048 are).
+pub fn default_face(map: &NormalMap, exr: bool) -> usize {
+    face_size_for(map, if exr { 1024 } else { 2048 }) as usize
 }
 
 /// What a preview shows and how it samples it.
@@ -146,6 +165,19 @@ impl Grid {
         )
     }
 
+    /// Rows `rows` of a map, as a map of their own.
+    fn rows(map: &NormalMap, rows: std::ops::Range<usize>) -> crate::Result<NormalMap> {
+        let w = map.width();
+        NormalMap::from_pixels(
+            Raster {
+                width: w,
+                height: rows.len(),
+                data: map.pixels().data[rows.start * w..rows.end * w].to_vec(),
+            },
+            vec![],
+        )
+    }
+
     /// The preview rows whose picked pixels differ between two maps of the channel.
     fn changed(&self, a: &NormalMap, b: &NormalMap) -> std::ops::Range<usize> {
         let (a, b) = (&a.pixels().data, &b.pixels().data);
@@ -182,15 +214,7 @@ impl Prepared {
         if let Some(f) = &self.f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        img.data
-            .par_iter_mut()
-            .zip(self.gain.par_iter())
-            // Outside the blend zones the gain is 1 (and the pixel stays as it is).
-            .filter(|(_, m)| **m != 1.0)
-            .for_each(|(p, &m)| {
-                let v = p.to_f32();
-                *p = <[u8; 4]>::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
-            });
+        apply_gains(&mut img, &self.gain);
         Ok(img)
     }
 }
@@ -254,22 +278,13 @@ impl Previews {
             }
         };
         stop()?;
-        let face = ask
-            .face
-            .unwrap_or_else(|| face_size_for(map, 2048) as usize);
+        let face = ask.face.unwrap_or_else(|| default_face(map, false));
         let look = Look {
             pattern: ask.pattern,
             face,
             filter: ask.filter,
         };
-        let gain = |c: &Computed| {
-            Arc::new(
-                grid.values(&c.geometry.weights)
-                    .iter()
-                    .map(|&k| f64::from(k).powf(1.0 / 2.2) as f32)
-                    .collect::<Vec<_>>(),
-            )
-        };
+        let gain = |c: &Computed| Arc::new(gains(&grid.values(&c.geometry.weights), 2.2));
         let f = computed.f.as_ref().map(|f| grid.values(f));
         // An earlier preview of this channel and ask, another warp: keep what still holds.
         let reuse = base.filter(|b| b.grid == grid && b.cube.face == face);
@@ -336,21 +351,6 @@ impl Previews {
     }
 }
 
-impl Grid {
-    /// Rows `rows` of a map, as a map of their own.
-    fn rows(map: &NormalMap, rows: std::ops::Range<usize>) -> crate::Result<NormalMap> {
-        let w = map.width();
-        NormalMap::from_pixels(
-            Raster {
-                width: w,
-                height: rows.len(),
-                data: map.pixels().data[rows.start * w..rows.end * w].to_vec(),
-            },
-            vec![],
-        )
-    }
-}
-
 impl Look {
     /// The procedural content on the faces marked in `on`; `full` is the pixel type's white.
     pub fn cube<T: Pixel>(&self, on: [bool; 6], full: f32) -> CubeMap<T> {
@@ -375,7 +375,7 @@ impl Look {
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        attenuate(&mut img, weights, gamma);
+        apply_gains(&mut img, &gains(weights, gamma));
         Ok(img)
     }
 
@@ -392,7 +392,7 @@ impl Look {
         let size = (map.width() as u32, map.height() as u32);
         let source = crate::gpu::warp::Source::Map(map);
         let mut img = g.pass.render(&g.gpu, &tex, source, size, f, None)?;
-        attenuate(&mut img, weights, 2.2);
+        apply_gains(&mut img, &gains(weights, 2.2));
         Ok(img)
     }
 }
