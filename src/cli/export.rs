@@ -62,6 +62,10 @@ pub struct ExportArgs {
     /// way), bilinear, celestia or sgct.
     #[arg(long)]
     reader: Option<String>,
+    /// The content is a panorama projected from this point x,y,z (metres) onto the wall
+    /// (seed 001), as for `render --project-from`; the 2d exports follow it.
+    #[arg(long, value_parser = super::args::parse_vec3, allow_hyphen_values = true)]
+    project_from: Option<glam::DVec3>,
     /// Bits of the MPCDI alpha maps: 8 (what readers decode) or 16.
     #[arg(long, default_value = "8", value_parser = ["8", "16"])]
     alpha_bits: String,
@@ -75,6 +79,21 @@ pub fn run(a: ExportArgs) -> Result<()> {
     // The command line waits for its export; nothing cancels it.
     let never = std::sync::atomic::AtomicBool::new(false);
     let rig = read_rig(&a.rig)?;
+    let centre = a
+        .project_from
+        .map(|c| rig.check_centre(c, "project-from"))
+        .transpose()
+        .map_err(super::args::flag_error)?;
+    // A channel's warp, its map seen from the projection centre when there is one.
+    let warp_of = |ch| {
+        let mut warp = rig.warp(ch);
+        if let Some(c) = centre {
+            warp.map = rig
+                .projected(&warp.map, Some(&warp.points), c, &never)
+                .expect("never cancelled");
+        }
+        warp
+    };
     let size = || {
         a.content_size
             .context("--content-size: needed for this format")
@@ -107,7 +126,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
         };
         let mut regions = Vec::new();
         for ch in &rig.channels {
-            let warp = rig.warp(ch);
+            let warp = warp_of(ch);
             let uv = canvas
                 .as_ref()
                 .map(|c| export::content_uv_unbounded(&warp.map, c))
@@ -155,7 +174,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
         .context("--channel: needed for this format")?;
     let ch = channel(&rig, id)?;
     let (w, h) = (ch.width as usize, ch.height as usize);
-    let warp = rig.warp(ch);
+    let warp = warp_of(ch);
     let canvas_uv = |size: Option<(u32, u32)>| -> Result<Vec<Option<[f64; 2]>>> {
         let (cw, chh) = size.context("--content-size: needed for this format")?;
         let canvas = a.canvas.view(cw, chh)?;

@@ -18,7 +18,7 @@ use omniwarp::projection::View;
 use omniwarp::raster::Pixel;
 use omniwarp::render::blur::Blur;
 use omniwarp::render::{self, Warp};
-use omniwarp::scene::Scene;
+use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
 use std::path::{Path, PathBuf};
 
@@ -35,13 +35,20 @@ pub struct RenderArgs {
     /// saturation (seed 000, Figure 5).
     #[arg(long, conflicts_with_all = ["projection", "normal_map"])]
     tiles: Option<PathBuf>,
-    /// Render a rig channel's projector image instead (with --channel): its own warp, its
-    /// blend mask applied in signal space.
-    #[arg(long, requires = "channel", conflicts_with_all = ["projection", "normal_map", "tiles"])]
+    /// Render a rig instead: with --channel, that projector's image (its own warp, its blend
+    /// mask applied in signal space); without, what the rig's eye sees of the wall through
+    /// --projection (nothing where the view misses the wall).
+    #[arg(long, conflicts_with_all = ["normal_map", "tiles"])]
     rig: Option<PathBuf>,
     /// The rig channel to render.
-    #[arg(long, requires = "rig")]
+    #[arg(long, requires = "rig", conflicts_with = "projection")]
     channel: Option<String>,
+    /// Project the content panorama from this point x,y,z (metres) onto the rig's wall or the
+    /// scene (seed 001), instead of showing it around the eye: the eye ray that meets the
+    /// surface at P shows the content's direction P − C. At the eye this is the plain
+    /// panorama; the point must be inside the wall.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    project_from: Option<DVec3>,
     /// Projector gamma for the blend mask (with --rig).
     #[arg(long, default_value_t = 2.2)]
     gamma: f64,
@@ -67,7 +74,22 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if let Some(spec) = &a.scene.scene {
         let (w, h) = a.size.context("--size: needed with --scene")?;
         let view = a.projection.view(w, h)?;
-        return render_scene(spec, &a.scene, &view, (w, h), &a.out);
+        let panorama = match &a.content.content {
+            Some(_) => Some(Projected {
+                content: match load_content(&a.content, false)? {
+                    AnyContent::U8(c) => c,
+                    AnyContent::F32(_) => {
+                        bail!("--content: a panorama projected onto a scene is 8-bit (PNG or JPEG)")
+                    }
+                },
+                centre: a.project_from.unwrap_or(a.scene.eye),
+            }),
+            None if a.project_from.is_some() => {
+                bail!("--project-from: needs the panorama to project (--content)")
+            }
+            None => None,
+        };
+        return render_scene(spec, &a.scene, panorama, &view, (w, h), &a.out);
     }
     if let Some(RendererArg::Gpu) = a.scene.renderer {
         bail!(
@@ -78,9 +100,23 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let mut mask = None;
     let map = match (&a.rig, &a.channel) {
         (Some(rig), Some(id)) => {
-            let (m, k) = render_inputs(rig, id, a.gamma)?;
+            let (m, k) = render_inputs(rig, id, a.gamma, a.project_from)?;
             mask = Some(k);
             Some(m)
+        }
+        (Some(path), None) => {
+            let (w, h) = a
+                .size
+                .context("--size: needed for the eye's view of a rig (--rig without --channel)")?;
+            let rig = read_rig(path)?;
+            let centre = rig
+                .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
+                .map_err(flag_error)?;
+            let view = a.projection.view(w, h)?;
+            Some(rig.eye_view(&view, w, h, centre).map_err(flag_error)?)
+        }
+        (None, _) if a.project_from.is_some() => {
+            bail!("--project-from: needs a surface to project onto: --rig (its wall) or --scene")
         }
         _ => a
             .normal_map
@@ -146,8 +182,14 @@ pub fn run(a: RenderArgs) -> Result<()> {
     write_output(&a.out, img, &[])
 }
 
-/// A channel's warp map and its blend mask in signal space, for `render --rig`.
-pub fn render_inputs(path: &Path, id: &str, gamma: f64) -> Result<(NormalMap, Vec<f32>)> {
+/// A channel's warp map (for a panorama projected from `project_from`, if given) and its blend
+/// mask in signal space, for `render --rig`.
+pub fn render_inputs(
+    path: &Path,
+    id: &str,
+    gamma: f64,
+    project_from: Option<DVec3>,
+) -> Result<(NormalMap, Vec<f32>)> {
     let rig = read_rig(path)?;
     let ch = channel(&rig, id)?;
     let w = rig.warp(ch);
@@ -156,7 +198,16 @@ pub fn render_inputs(path: &Path, id: &str, gamma: f64) -> Result<(NormalMap, Ve
         .iter()
         .map(|&x| (f64::from(x).powf(1.0 / gamma)) as f32)
         .collect();
-    Ok((w.map, mask))
+    let map = match project_from {
+        Some(c) => {
+            let c = rig.check_centre(c, "project-from").map_err(flag_error)?;
+            let never = std::sync::atomic::AtomicBool::new(false);
+            rig.projected(&w.map, Some(&w.points), c, &never)
+                .expect("never cancelled")
+        }
+        None => w.map,
+    };
+    Ok((map, mask))
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -178,9 +229,11 @@ impl RendererArg {
 
 #[derive(Args)]
 pub struct SceneArgs {
-    /// Render a 3D scene instead of content: a .gltf/.glb or .obj file, or the procedural
-    /// city:small, city:medium or city:large (~10k, 100k, 1M triangles).
-    #[arg(long, conflicts_with_all = ["content", "normal_map", "tiles", "rig"])]
+    /// Render a 3D scene instead of content: a .gltf/.glb or .obj file, the procedural
+    /// city:small, city:medium or city:large (~10k, 100k, 1M triangles), or wall:RIG.json (a
+    /// rig's screen as triangles, cut every degree). With --content, the content panorama is projected onto the scene from --project-from
+    /// (default: the eye) instead of the scene's own colours.
+    #[arg(long, conflicts_with_all = ["normal_map", "tiles", "rig"])]
     pub scene: Option<String>,
     /// Eye position x,y,z in the scene, metres.
     #[arg(long, value_parser = parse_vec3, default_value = "0,1.7,0", allow_hyphen_values = true)]
@@ -206,6 +259,7 @@ pub struct SceneArgs {
 fn render_scene(
     spec: &str,
     a: &SceneArgs,
+    panorama: Option<Projected>,
     view: &View,
     size: (u32, u32),
     out: &Path,
@@ -225,6 +279,7 @@ fn render_scene(
         a.adapter.as_deref(),
     )
     .map_err(flag_error)?;
+    r.set_panorama(panorama).map_err(flag_error)?;
     let opts = FrameOptions {
         size,
         face: a.face,

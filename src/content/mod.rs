@@ -14,6 +14,7 @@
 
 mod atlas;
 pub mod pattern;
+pub mod projective;
 
 pub use atlas::{Atlas, PAD};
 
@@ -137,6 +138,58 @@ impl<T: Pixel> Content<T> {
 
     pub fn atlas(&self) -> &Atlas<T> {
         &self.atlas
+    }
+
+    /// The content seen in direction `d`, bilinearly filtered (as a plan's bilinear tap reads
+    /// it, to 1/65536 of a texel); `None` where the content does not cover `d`. For one-off
+    /// lookups (a ray caster's shading); images go through a [`crate::render::Plan`].
+    pub fn sample(&self, d: DVec3) -> Option<[f32; 4]> {
+        let (x, y) = self.locate(d)?;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (i, j) = (x0 as usize, y0 as usize);
+        let w = self.atlas.width;
+        if i + 1 >= w || j + 1 >= self.atlas.height {
+            return None;
+        }
+        let frac = |f: f64| ((f * 65536.0).round() as u32).min(65535) as u16;
+        let at = j * w + i;
+        let a = &self.atlas.data;
+        Some(
+            T::bilinear(
+                a[at],
+                a[at + 1],
+                a[at + w],
+                a[at + w + 1],
+                frac(x - x0),
+                frac(y - y0),
+            )
+            .to_f32(),
+        )
+    }
+
+    /// How directions map into the atlas, for a GPU twin of [`Locate::locate`]: kind (0 cube,
+    /// 1 equirect, 2 cylinder), then the face size or the panorama's width, height, hfov and
+    /// vfov (equirect, radians) or H = 2·tan(vfov/2) (cylinder).
+    pub fn lookup(&self) -> (u32, [f64; 4]) {
+        match self.kind {
+            Kind::Cube { n } => (0, [n as f64, 0.0, 0.0, 0.0]),
+            Kind::Panorama {
+                w,
+                h,
+                hfov,
+                vertical: Vertical::Equirect { vfov },
+            } => (1, [w as f64, h as f64, hfov, vfov]),
+            Kind::Panorama {
+                w,
+                h,
+                hfov,
+                vertical: Vertical::Cylinder { h: height },
+            } => (2, [w as f64, h as f64, hfov, height]),
+        }
+    }
+
+    pub fn orientation(&self) -> Orientation {
+        self.orientation
     }
 }
 

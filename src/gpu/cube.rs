@@ -6,8 +6,11 @@
 //! the output's finest angular pixel pitch unless given.
 
 use super::Gpu;
+use super::projected::PanoramaPass;
 use super::warp::CubeTexture;
 use crate::cubemap::Face;
+use crate::error::Result;
+use crate::scene::Projected;
 use crate::scene::{SKY, Scene, sun};
 use bytemuck::{Pod, Zeroable};
 use glam::{DVec3, Mat4, Vec4};
@@ -22,27 +25,37 @@ const FAR: f32 = 5000.0;
 struct FaceUniform {
     clip: [[f32; 4]; 4],
     sun: [f32; 4],
+    /// sc, −tc, ma: where the sky pass of a projected panorama finds its directions.
+    axes: [[f32; 4]; 3],
 }
 
-/// Clip-space matrix of one face: rows (sc, −tc, depth, |ma|) of the CPU's cube table applied to
-/// P − eye, so that x = sc/|ma|, y = −tc/|ma| (texture rows run down) and depth ∈ [0, 1].
-pub fn face_matrix(face: Face, eye: glam::Vec3) -> Mat4 {
-    let (sc, tc, ma) = match face {
+/// The axes sc, tc and ma of the CPU's cube table for one face.
+fn face_axes(face: Face) -> (Vec4, Vec4, Vec4) {
+    match face {
         Face::PosX => (-Vec4::Z, -Vec4::Y, Vec4::X),
         Face::NegX => (Vec4::Z, -Vec4::Y, -Vec4::X),
         Face::PosY => (Vec4::X, Vec4::Z, Vec4::Y),
         Face::NegY => (Vec4::X, -Vec4::Z, -Vec4::Y),
         Face::PosZ => (Vec4::X, -Vec4::Y, Vec4::Z),
         Face::NegZ => (-Vec4::X, -Vec4::Y, -Vec4::Z),
-    };
+    }
+}
+
+/// Clip-space matrix of one face: rows (sc, −tc, depth, |ma|) of the CPU's cube table applied to
+/// P − eye, so that x = sc/|ma|, y = −tc/|ma| (texture rows run down) and depth ∈ [0, 1].
+pub fn face_matrix(face: Face, eye: glam::Vec3) -> Mat4 {
+    let (sc, tc, ma) = face_axes(face);
     let (a, b) = (FAR / (FAR - NEAR), -FAR * NEAR / (FAR - NEAR));
     let rows = [sc, -tc, ma * a + Vec4::W * b, ma];
     Mat4::from_cols(rows[0], rows[1], rows[2], rows[3]).transpose() * Mat4::from_translation(-eye)
 }
 
 pub struct CubePass {
+    module: wgpu::ShaderModule,
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
+    /// A panorama projected onto the scene instead of its colours (seed 001).
+    panorama: Option<PanoramaPass>,
     positions: wgpu::Buffer,
     colors: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -78,61 +91,7 @@ impl CubePass {
                     count: None,
                 }],
             });
-        let pl = gpu
-            .device
-            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: None,
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-        let pipeline = gpu
-            .device
-            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("scene"),
-                layout: Some(&pl),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[
-                        Some(wgpu::VertexBufferLayout {
-                            array_stride: 12,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                        }),
-                        Some(wgpu::VertexBufferLayout {
-                            array_stride: 4,
-                            step_mode: wgpu::VertexStepMode::Vertex,
-                            attributes: &wgpu::vertex_attr_array![1 => Unorm8x4],
-                        }),
-                    ],
-                },
-                // The face matrices mirror (the table is left-handed): draw both sides.
-                primitive: wgpu::PrimitiveState {
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: wgpu::TextureFormat::Depth32Float,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: wgpu::TextureFormat::Rgba8Unorm,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+        let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main");
         let buffer = |bytes: &[u8], usage| {
             gpu.device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -142,8 +101,10 @@ impl CubePass {
                 })
         };
         CubePass {
+            module,
             pipeline,
             layout,
+            panorama: None,
             positions: buffer(
                 bytemuck::cast_slice(&scene.positions),
                 wgpu::BufferUsages::VERTEX,
@@ -161,6 +122,30 @@ impl CubePass {
             shown: None,
             faces_drawn: 0,
         }
+    }
+
+    /// Shows `panorama` projected from its centre onto the scene instead of the scene's own
+    /// colours (seed 001), or the scene's colours again with `None`.
+    pub fn set_panorama(&mut self, gpu: &Gpu, panorama: Option<&Projected>) -> Result<()> {
+        self.panorama = match panorama {
+            Some(p) => Some(PanoramaPass::new(gpu, &self.module, &self.layout, p)?),
+            None => None,
+        };
+        self.shown = None;
+        Ok(())
+    }
+
+    /// Moves the projected panorama's centre.
+    pub fn set_centre(&mut self, gpu: &Gpu, centre: DVec3) {
+        if let Some(p) = &mut self.panorama {
+            p.set_centre(gpu, centre);
+            self.shown = None;
+        }
+    }
+
+    /// Forgets what the target shows, so that the next render draws (benchmarks).
+    pub fn invalidate(&mut self) {
+        self.shown = None;
     }
 
     /// Draws the scene from `eye` into the `faces` of `target` (the others are cleared to
@@ -220,9 +205,11 @@ impl CubePass {
                 array_layer_count: Some(1),
                 ..Default::default()
             });
+            let (sc, tc, ma) = face_axes(face);
             let uniform = FaceUniform {
                 clip: face_matrix(face, eye.as_vec3()).to_cols_array_2d(),
                 sun: sun().extend(0.0).to_array(),
+                axes: [sc.to_array(), (-tc).to_array(), ma.to_array()],
             };
             let buf = gpu
                 .device
@@ -264,8 +251,15 @@ impl CubePass {
                     multiview_mask: None,
                 });
                 if draw {
-                    pass.set_pipeline(&self.pipeline);
                     pass.set_bind_group(0, &bind, &[]);
+                    let pipeline = match &self.panorama {
+                        Some(p) => {
+                            p.draw_sky(&mut pass);
+                            &p.pipeline
+                        }
+                        None => &self.pipeline,
+                    };
+                    pass.set_pipeline(pipeline);
                     pass.set_vertex_buffer(0, self.positions.slice(..));
                     pass.set_vertex_buffer(1, self.colors.slice(..));
                     pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
@@ -279,4 +273,69 @@ impl CubePass {
         self.shown = Some(key);
         true
     }
+}
+
+/// A pipeline drawing the scene's triangles into a cube face with depth, fragment shader
+/// `fs` of the scene module.
+pub(super) fn scene_pipeline(
+    gpu: &Gpu,
+    module: &wgpu::ShaderModule,
+    layouts: &[&wgpu::BindGroupLayout],
+    fs: &str,
+) -> wgpu::RenderPipeline {
+    let layouts: Vec<_> = layouts.iter().map(|l| Some(*l)).collect();
+    let pl = gpu
+        .device
+        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: None,
+            bind_group_layouts: &layouts,
+            immediate_size: 0,
+        });
+    gpu.device
+        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(fs),
+            layout: Some(&pl),
+            vertex: wgpu::VertexState {
+                module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[
+                    Some(wgpu::VertexBufferLayout {
+                        array_stride: 12,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                    }),
+                    Some(wgpu::VertexBufferLayout {
+                        array_stride: 4,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![1 => Unorm8x4],
+                    }),
+                ],
+            },
+            // The face matrices mirror (the table is left-handed): draw both sides.
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module,
+                entry_point: Some(fs),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: wgpu::TextureFormat::Rgba8Unorm,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
 }

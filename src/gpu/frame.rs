@@ -14,7 +14,7 @@ use crate::raster::Raster;
 use crate::render::blur::{Blur, radial_blur};
 use crate::render::coverage::{face_size_for, faces_sampled};
 use crate::render::{self, Filter, Warp};
-use crate::scene::{RayCaster, Scene};
+use crate::scene::{Projected, RayCaster, Scene};
 use glam::DVec3;
 
 #[derive(Debug, Clone, Copy)]
@@ -41,17 +41,21 @@ enum Backend {
     Gpu {
         gpu: Box<Gpu>,
         warp: Box<WarpPass>,
-        cube: CubePass,
+        cube: Box<CubePass>,
         target: Option<CubeTexture>,
     },
     Cpu {
         caster: Box<RayCaster>,
         cached: Option<CpuCube>,
+        panorama: Option<Box<Projected>>,
     },
 }
 
-/// The CPU's cube map and the (eye, face size, faces cast) it shows.
-type CpuCube = (([f32; 3], u32, [bool; 6]), CubeMap<[u8; 4]>);
+/// The CPU's cube map and the (eye, face size, faces cast, panorama centre) it shows.
+type CpuCube = (
+    ([f32; 3], u32, [bool; 6], Option<[f32; 3]>),
+    CubeMap<[u8; 4]>,
+);
 
 /// Face size and faces decided for a view (they change only with the view).
 type Plan = (Vec<u8>, Option<u32>, bool, (u32, [bool; 6]));
@@ -86,7 +90,7 @@ impl SceneRenderer {
         let backend = match gpu {
             Some(gpu) => {
                 let warp = Box::new(WarpPass::new(&gpu));
-                let cube = CubePass::new(&gpu, &scene);
+                let cube = Box::new(CubePass::new(&gpu, &scene));
                 Backend::Gpu {
                     gpu: Box::new(gpu),
                     warp,
@@ -97,6 +101,7 @@ impl SceneRenderer {
             None => Backend::Cpu {
                 caster: Box::new(scene.ray_caster()?),
                 cached: None,
+                panorama: None,
             },
         };
         Ok(SceneRenderer {
@@ -110,6 +115,44 @@ impl SceneRenderer {
         match &self.backend {
             Backend::Gpu { gpu, .. } => gpu.describe(),
             Backend::Cpu { .. } => "CPU (ray-cast cube map, CPU warp)".into(),
+        }
+    }
+
+    /// Shows `panorama` projected from its centre onto the scene (seed 001) instead of the
+    /// scene's own colours, or the scene's colours again with `None`.
+    pub fn set_panorama(&mut self, panorama: Option<Projected>) -> Result<()> {
+        match &mut self.backend {
+            Backend::Gpu { gpu, cube, .. } => cube.set_panorama(gpu, panorama.as_ref()),
+            Backend::Cpu {
+                panorama: p,
+                cached,
+                ..
+            } => {
+                *p = panorama.map(Box::new);
+                *cached = None;
+                Ok(())
+            }
+        }
+    }
+
+    /// Moves the projected panorama's centre (no upload of the panorama again).
+    pub fn set_centre(&mut self, centre: DVec3) {
+        match &mut self.backend {
+            Backend::Gpu { gpu, cube, .. } => cube.set_centre(gpu, centre),
+            Backend::Cpu { panorama, .. } => {
+                if let Some(p) = panorama {
+                    p.centre = centre;
+                }
+            }
+        }
+    }
+
+    /// Forgets the cube map shown, so that the next frame draws it again (benchmarks that
+    /// time the whole frame).
+    pub fn invalidate(&mut self) {
+        match &mut self.backend {
+            Backend::Gpu { cube, .. } => cube.invalidate(),
+            Backend::Cpu { cached, .. } => *cached = None,
         }
     }
 
@@ -183,12 +226,21 @@ impl SceneRenderer {
                     },
                 ))
             }
-            Backend::Cpu { caster, cached } => {
+            Backend::Cpu {
+                caster,
+                cached,
+                panorama,
+            } => {
                 // Only the faces the view samples are cast, as the GPU renders only those.
-                let key = (o.eye.as_vec3().to_array(), face, faces);
+                let centre = panorama.as_ref().map(|p| p.centre.as_vec3().to_array());
+                let key = (o.eye.as_vec3().to_array(), face, faces, centre);
                 let updated = cached.as_ref().is_none_or(|c| c.0 != key);
                 if updated {
-                    *cached = Some((key, caster.cube(o.eye, face as usize, faces)));
+                    let cube = match panorama {
+                        Some(p) => caster.cube_projected(o.eye, face as usize, faces, p),
+                        None => caster.cube(o.eye, face as usize, faces),
+                    };
+                    *cached = Some((key, cube));
                 }
                 let cube = &cached.as_ref().expect("set above").1;
                 let mut img = render::render(

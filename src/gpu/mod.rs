@@ -14,6 +14,7 @@ pub mod blur;
 pub mod cube;
 pub mod frame;
 mod pass;
+mod projected;
 pub mod warp;
 
 use crate::error::{Error, Result};

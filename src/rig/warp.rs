@@ -3,7 +3,9 @@
 //! content sampling vector V. Exact per pixel, rows in parallel.
 
 use super::{Channel, Rig};
+use crate::content::projective::{Projective, Receiver, map_pixels};
 use crate::normalmap::NormalMap;
+use crate::projection::view::screen_of_pixel;
 use crate::raster::Raster;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -31,8 +33,100 @@ impl Rig {
 
     /// The content sampling vector for wall point `p`.
     pub fn sampling_vector(&self, p: DVec3) -> Option<DVec3> {
-        let d = (p - self.eye).try_normalize()?;
-        Some((self.content.apply(d) - self.offaxis).normalize())
+        self.sampling_vector_from(p, self.eye)
+    }
+
+    /// The content sampling vector for wall point `p` when the content is a panorama projected
+    /// from `centre` (seed 001); at the eye this is [`Rig::sampling_vector`], to the bit.
+    pub fn sampling_vector_from(&self, p: DVec3, centre: DVec3) -> Option<DVec3> {
+        let d = (p - centre).try_normalize()?;
+        Some(self.content_vector(d))
+    }
+
+    /// V = C·d − O, normalised: the content direction of world direction `d`.
+    fn content_vector(&self, d: DVec3) -> DVec3 {
+        (self.content.apply(d) - self.offaxis).normalize()
+    }
+
+    /// The world direction `d` whose content direction is `v` (the inverse of V = C·d − O
+    /// normalised): C·d = λ·V + O with λ the positive root of |λ·V + O| = 1, which exists
+    /// because |O| < 1.
+    pub fn world_direction(&self, v: DVec3) -> DVec3 {
+        let o = self.offaxis;
+        let vo = v.dot(o);
+        let lambda = -vo + (vo * vo + 1.0 - o.length_squared()).sqrt();
+        self.content.apply_inverse(lambda * v + o).normalize()
+    }
+
+    /// Checks a panorama projection centre: inside the wall, not on it. `field` names it.
+    pub fn check_centre(&self, centre: DVec3, field: &str) -> crate::Result<DVec3> {
+        self.doc.screen.check_inside(self.eye, centre, field)?;
+        Ok(centre)
+    }
+
+    /// A channel's warp map for a panorama projected from `centre` onto the wall, from its map
+    /// of sampling vectors from the eye (the geometry's or a tile screen's). With `points`, the
+    /// wall points of the channel's own warp, each pixel's wall point is taken from there;
+    /// otherwise (a tile screen moved the directions) each direction is followed from the eye
+    /// to the wall. `None` once `cancel` is set.
+    pub fn projected(
+        &self,
+        map: &NormalMap,
+        points: Option<&[Option<DVec3>]>,
+        centre: DVec3,
+        cancel: &AtomicBool,
+    ) -> Option<NormalMap> {
+        let w = map.width();
+        let from = Projective {
+            surface: &self.doc.screen,
+            eye: self.eye,
+            centre,
+        };
+        let pixels = map_pixels(w, map.height(), cancel, |i, j| {
+            let v = map.direction(i, j)?;
+            let d = match points.and_then(|p| p[j * w + i]) {
+                Some(p) => from.of_point(p)?,
+                None => from.direction(self.world_direction(v)),
+            };
+            Some(self.content_vector(d))
+        })?;
+        let mut attributes = map.attributes.clone();
+        attributes.push(("omniwarp.project_from".into(), format_point(centre)));
+        Some(NormalMap::from_pixels(pixels, attributes).expect("unit vectors and 0/1 validity"))
+    }
+
+    /// What the eye sees of the wall through `view` (its directions taken as eye rays in the
+    /// world) with a panorama projected from `centre` onto it: the content sampling vector per
+    /// pixel, or none where the ray misses the wall.
+    pub fn eye_view(
+        &self,
+        view: &crate::projection::View,
+        width: u32,
+        height: u32,
+        centre: DVec3,
+    ) -> crate::Result<NormalMap> {
+        crate::raster::check_size(width, height, 1)?;
+        let from = Projective {
+            surface: &self.doc.screen,
+            eye: self.eye,
+            centre,
+        };
+        let never = AtomicBool::new(false);
+        let pixels = map_pixels(width as usize, height as usize, &never, |i, j| {
+            let (s, t) = screen_of_pixel(i as f64 + 0.5, j as f64 + 0.5, width, height);
+            let ray = view.direction(s, t).ok()?;
+            let p = self.doc.screen.hit(self.eye, ray)?;
+            Some(self.content_vector(from.of_point(p)?))
+        })
+        .expect("never cancelled");
+        let attributes = vec![
+            (
+                "omniwarp.projection".into(),
+                view.projection().name().into(),
+            ),
+            ("omniwarp.project_from".into(), format_point(centre)),
+        ];
+        NormalMap::from_pixels(pixels, attributes)
     }
 
     pub fn warp(&self, ch: &Channel) -> ChannelWarp {
@@ -106,4 +200,8 @@ impl Rig {
             points,
         })
     }
+}
+
+fn format_point(p: DVec3) -> String {
+    format!("{},{},{}", p.x, p.y, p.z)
 }

@@ -20,6 +20,14 @@ pub fn sun() -> Vec3 {
     Vec3::new(0.4, 0.8, 0.45).normalize()
 }
 
+/// A panorama projected from `centre` onto the scene instead of its own colours (seed 001;
+/// see [`crate::content::projective`]): both renderers show it, the GPU in its cube-map pass,
+/// the CPU in [`RayCaster::cube_projected`].
+pub struct Projected {
+    pub content: crate::content::Content<[u8; 4]>,
+    pub centre: DVec3,
+}
+
 /// Indexed triangles with a colour per vertex.
 #[derive(Debug, Clone, Default)]
 pub struct Scene {
@@ -181,13 +189,19 @@ impl Scene {
         s
     }
 
-    /// `city:small|medium|large` (~10k, ~100k, ~1M triangles) or a `.gltf`/`.glb`/`.obj` file.
+    /// `city:small|medium|large` (~10k, ~100k, ~1M triangles), `wall:RIG.json` (the rig's
+    /// screen as triangles, [`crate::surface::Screen::triangles`]) or a `.gltf`/`.glb`/`.obj`
+    /// file.
     pub fn load(spec: &str) -> Result<Scene> {
         match spec {
             "city:small" => return Ok(Scene::city(10_000)),
             "city:medium" => return Ok(Scene::city(100_000)),
             "city:large" => return Ok(Scene::city(1_000_000)),
             _ => {}
+        }
+        if let Some(rig) = spec.strip_prefix("wall:") {
+            let rig = crate::rig::Rig::read(Path::new(rig))?;
+            return Ok(Scene::from_triangles(&rig.doc.screen.triangles()));
         }
         if spec.starts_with("city:") {
             return Err(Error::invalid(
@@ -207,7 +221,7 @@ impl Scene {
                 return Err(Error::invalid(
                     "scene",
                     format!(
-                        "`{spec}`: expected a .gltf, .glb or .obj file, or city:small|medium|large"
+                        "`{spec}`: expected a .gltf, .glb or .obj file, wall:RIG.json, or city:small|medium|large"
                     ),
                 ));
             }
@@ -220,14 +234,21 @@ impl Scene {
 
     /// An OBJ file's triangles, in one grey.
     pub fn read_obj(path: &Path) -> Result<Scene> {
+        Ok(Scene::from_triangles(&crate::surface::read_obj_triangles(
+            path,
+        )?))
+    }
+
+    /// Triangles in one grey.
+    pub fn from_triangles(tris: &[[DVec3; 3]]) -> Scene {
         let mut s = Scene::default();
-        for t in crate::surface::read_obj_triangles(path)? {
+        for t in tris {
             let base = s.positions.len() as u32;
             s.positions.extend(t.map(|v| v.as_vec3().to_array()));
             s.colors.extend([[200, 200, 200, 255]; 3]);
             s.indices.extend([base, base + 1, base + 2]);
         }
-        Ok(s)
+        s
     }
 
     /// A glTF scene's triangle primitives, world transforms applied, coloured by the material's

@@ -2,7 +2,7 @@
 //! shades it. The CPU twin of the cube-map pass (`src/gpu/cube.rs`, `shaders/scene.wgsl`): same
 //! face table, same sun, same sky, so the two agree to rounding where both see one triangle.
 
-use super::{SKY, sun};
+use super::{Projected, SKY, sun};
 use crate::cubemap::CubeMap;
 use crate::surface::Mesh;
 use glam::DVec3;
@@ -16,6 +16,32 @@ pub struct RayCaster {
 impl RayCaster {
     /// The scene seen from `eye` as a cube map (the CPU's cube-map pass): the colour of the
     /// first triangle met, shaded as the GPU shades it, else the sky.
+    /// The scene seen from `eye` with a panorama projected onto it (the CPU's twin of the GPU's
+    /// `fs_projected` and `fs_sky`): a surface point P shows the panorama's direction P − C, a
+    /// ray that meets nothing the panorama in its own direction; opaque black where the
+    /// panorama does not reach.
+    pub fn cube_projected(
+        &self,
+        eye: DVec3,
+        face: usize,
+        on: [bool; 6],
+        p: &Projected,
+    ) -> CubeMap<[u8; 4]> {
+        CubeMap::from_fn_on(face, 1, on, |d| {
+            let towards = match self.mesh.first_hit(eye, d) {
+                Some((t, _, _)) => (eye + d * t - p.centre).try_normalize().unwrap_or(d),
+                None => d,
+            };
+            match p.content.sample(towards) {
+                Some(c) => {
+                    let f = |v: f32| v.round().clamp(0.0, 255.0) as u8;
+                    [f(c[0]), f(c[1]), f(c[2]), 255]
+                }
+                None => [0, 0, 0, 255],
+            }
+        })
+    }
+
     pub fn cube(&self, eye: DVec3, face: usize, on: [bool; 6]) -> CubeMap<[u8; 4]> {
         let sun = sun().as_dvec3();
         CubeMap::from_fn_on(face, 1, on, |d| match self.mesh.first_hit(eye, d) {

@@ -233,6 +233,7 @@ pub async fn put_content(
     let wanted = if_match(&headers)?;
     let canvas: Canvas = parse_body(&body)?;
     canvas.view()?;
+    canvas.centre(&s.store.snapshot().0)?;
     let d = data(&s, &id).await?;
     let mut g = d.lock().await;
     fresh(g.content.revision, wanted)?;

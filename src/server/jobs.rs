@@ -34,9 +34,15 @@ pub fn etag(key: u64, rig_revision: u64, tiles_revision: u64) -> String {
 }
 
 /// Cache keys by content, not revision number: the geometry's from the rig document and the
-/// channel, the computed warp's from that and the tile screen. (Revision numbers can repeat
-/// after a damaged file falls back to its `.prev`; contents that differ cannot share a key.)
-pub fn keys(rig: &Rig, id: &str, tiles: &Option<crate::tiles::TileScreen>) -> (u64, u64) {
+/// channel, the computed warp's from that, the tile screen and the canvas's projection centre.
+/// (Revision numbers can repeat after a damaged file falls back to its `.prev`; contents that
+/// differ cannot share a key.)
+pub fn keys(
+    rig: &Rig,
+    id: &str,
+    tiles: &Option<crate::tiles::TileScreen>,
+    project_from: Option<[f64; 3]>,
+) -> (u64, u64) {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
     id.hash(&mut h);
@@ -47,6 +53,9 @@ pub fn keys(rig: &Rig, id: &str, tiles: &Option<crate::tiles::TileScreen>) -> (u
     serde_json::to_vec(tiles)
         .expect("tile screens serialise")
         .hash(&mut h);
+    if let Some(c) = project_from {
+        c.map(f64::to_bits).hash(&mut h);
+    }
     (geometry, h.finish())
 }
 
@@ -151,7 +160,7 @@ pub async fn inputs(s: &Arc<AppState>, id: &str) -> Result<Inputs, ApiError> {
             g.content.value.clone(),
         )
     };
-    let (geometry_key, key) = keys(&rig, id, &tiles);
+    let (geometry_key, key) = keys(&rig, id, &tiles, canvas.project_from);
     Ok(Inputs {
         rig,
         rig_revision,
@@ -201,6 +210,17 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
         .expect("cache lock")
         .get(&(id.to_string(), geometry_key))
         .cloned();
+    let centre = canvas.centre(&rig).map_err(|e| {
+        ApiError::refused(
+            axum::http::StatusCode::CONFLICT,
+            Some("/project_from"),
+            format!(
+                "the content canvas's projection centre does not fit the current rig ({}); \
+                 PUT /v1/channels/{id}/content with another",
+                e.reason()
+            ),
+        )
+    })?;
     let (r, id2, state) = (rig.clone(), id.to_string(), s.clone());
     let computed = run_job(s, move |cancel| {
         let ch = r.channel(&id2)?;
@@ -225,6 +245,16 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
                 (fm.normal_map(), Some(fm.f()))
             }
             None => (geometry.warp.map.clone(), None),
+        };
+        // A projected panorama (seed 001): the tile screen's directions, or the geometry's
+        // wall points where no screen moved them, seen from the canvas's centre.
+        let map = match centre {
+            Some(c) => {
+                let points = tiles.is_none().then_some(&geometry.warp.points[..]);
+                r.projected(&map, points, c, cancel)
+                    .ok_or(crate::Error::Cancelled)?
+            }
+            None => map,
         };
         cancelled(cancel)?;
         Ok(Arc::new(Computed {

@@ -49,6 +49,11 @@ crate::projection::doc::view_document! {
     pub struct Canvas {
         /// Width and height, pixels.
         pub size: [u32; 2],
+        /// Where the content was shot, when it is a panorama projected from there onto the
+        /// wall (seed 001) instead of shown around the eye: [x, y, z] in metres, inside the
+        /// wall. The eye point itself is the plain panorama.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        pub project_from: Option<[f64; 3]>,
     }
 }
 
@@ -67,6 +72,7 @@ impl Default for Canvas {
             offaxis: [0.0; 3],
             zoom: 1.0,
             size: [4096, 2048],
+            project_from: None,
         }
     }
 }
@@ -84,6 +90,13 @@ impl Canvas {
         self.doc()
             .view(f64::from(h) / f64::from(w))
             .map_err(crate::projection::doc::pointer)
+    }
+
+    /// The panorama's projection centre checked against `rig`'s wall, if the canvas has one.
+    pub fn centre(&self, rig: &crate::rig::Rig) -> crate::Result<Option<glam::DVec3>> {
+        self.project_from
+            .map(|c| rig.check_centre(glam::DVec3::from_array(c), "/project_from"))
+            .transpose()
     }
 }
 

@@ -8,6 +8,7 @@
 
 mod mesh;
 mod shapes;
+mod tessellate;
 
 pub use mesh::{Mesh, parse_obj_triangles, read_obj_triangles};
 pub use shapes::{Cylinder, Dome, Plane};
@@ -22,6 +23,9 @@ pub const GRAZING_DEG: f64 = 89.0;
 /// sin(90° − GRAZING_DEG): the cosine of incidence below which a hit grazes. Written out
 /// because `sin` is not a const fn and classifying every pixel's hit called it.
 const GRAZING_COS: f64 = 0.017_452_406_437_283_51;
+
+/// A point closer than this to a surface counts as on it, metres.
+pub const ON_SURFACE: f64 = 1e-3;
 
 /// Rays start this far in front of their origin, so a point on the surface does not hit itself.
 const EPS: f64 = 1e-9;
@@ -141,6 +145,80 @@ impl Screen {
                     format!("mesh `{obj}` is not loaded"),
                 )),
             },
+        }
+    }
+
+    /// Checks that `point` lies where the surface can be projected onto from: inside a
+    /// cylinder or a dome's sphere, on the lit side of a plane, and for a mesh reachable from
+    /// `eye` without crossing it. A point within [`ON_SURFACE`] of the surface is refused too:
+    /// every direction from it meets the wall at once. `field` names the point in errors.
+    pub fn check_inside(&self, eye: DVec3, point: DVec3, field: &str) -> Result<()> {
+        let point = finite3(field, point)?;
+        let m = |v: f64| format!("{v:.3} m");
+        // The signed distance inside (positive) or beyond (negative) the surface, and what
+        // "beyond" means for this shape.
+        let (inside, beyond) = match self {
+            Screen::Cylinder(c) => {
+                let a = DVec3::from_array(c.axis).normalize();
+                let o = point - DVec3::from_array(c.centre);
+                let rho = (o - a * o.dot(a)).length();
+                (
+                    c.radius - rho,
+                    format!(
+                        "{} from the axis, outside the cylinder of radius {}",
+                        m(rho),
+                        m(c.radius)
+                    ),
+                )
+            }
+            Screen::Dome(d) => {
+                let r = (point - DVec3::from_array(d.centre)).length();
+                (
+                    d.radius - r,
+                    format!(
+                        "{} from the centre, outside the dome of radius {}",
+                        m(r),
+                        m(d.radius)
+                    ),
+                )
+            }
+            Screen::Plane(p) => {
+                let n = DVec3::from_array(p.normal).normalize();
+                let s = (point - DVec3::from_array(p.centre)).dot(n);
+                (s, format!("{} behind the plane", m(-s)))
+            }
+            Screen::Mesh { loaded, .. } => {
+                let Some(mesh) = loaded else { return Ok(()) };
+                let to = point - eye;
+                let len = to.length();
+                if len < ON_SURFACE {
+                    return Ok(());
+                }
+                match mesh.first_hit(eye, to / len) {
+                    Some((t, _, _)) if t < len + ON_SURFACE => (
+                        t - len,
+                        format!(
+                            "behind the mesh as seen from the eye ({} past it)",
+                            m(len - t)
+                        ),
+                    ),
+                    _ => (f64::INFINITY, String::new()),
+                }
+            }
+        };
+        if inside.abs() <= ON_SURFACE {
+            Err(Error::invalid(
+                field,
+                format!(
+                    "lies on the wall ({} from it); a projection centre must be at least {} inside",
+                    m(inside.abs()),
+                    m(ON_SURFACE)
+                ),
+            ))
+        } else if inside < 0.0 {
+            Err(Error::invalid(field, format!("lies {beyond}")))
+        } else {
+            Ok(())
         }
     }
 

@@ -45,7 +45,7 @@ pub struct Cylinder {
 }
 
 impl Cylinder {
-    fn frame(&self) -> (DVec3, DVec3, DVec3) {
+    pub(super) fn frame(&self) -> (DVec3, DVec3, DVec3) {
         let a = DVec3::from_array(self.axis).normalize();
         let mut front = DVec3::NEG_Z - a * DVec3::NEG_Z.dot(a);
         if front.length() < 1e-9 {
@@ -193,7 +193,7 @@ pub struct Plane {
 }
 
 impl Plane {
-    fn frame(&self) -> (DVec3, DVec3, DVec3) {
+    pub(super) fn frame(&self) -> (DVec3, DVec3, DVec3) {
         let n = DVec3::from_array(self.normal).normalize();
         let up = DVec3::from_array(self.up);
         let up = (up - n * up.dot(n)).normalize();
