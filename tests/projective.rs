@@ -197,11 +197,11 @@ fn bad_centres_are_named_errors() {
     let cases = [
         (CYLINDER, [3.0, 0.0, 0.0], "outside the cylinder"),
         (CYLINDER, [0.0, 5.0, -2.5], "outside the cylinder"),
-        (CYLINDER, [2.0, 0.3, 0.0], "on the wall"),
+        (CYLINDER, [1.9995, 0.3, 0.0], "on the wall"),
         (DOME, [0.0, 0.0, 3.5], "outside the dome"),
-        (DOME, [0.0, 3.0, 0.0], "on the wall"),
+        (DOME, [0.0, 2.9995, 0.0], "on the wall"),
         (PLANE, [0.0, 0.0, -3.5], "behind the plane"),
-        (PLANE, [1.0, 0.5, -3.0], "on the wall"),
+        (PLANE, [1.0, 0.5, -2.9995], "on the wall"),
         (PLANE, [f64::NAN, 0.0, 0.0], "finite"),
     ];
     for (screen, c, says) in cases {
@@ -402,4 +402,135 @@ async fn the_daemon_takes_a_projection_centre_as_a_content_parameter() {
     let b = json(&body);
     assert_eq!(status, 409, "{b}");
     assert!(b.to_string().contains("/project_from"), "{b}");
+}
+
+#[test]
+fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    let rig =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/cylinder-270-3proj.json");
+    let rig = rig.to_str().unwrap();
+    assert!(run(&["pattern", "--size", "512x256", "--out", "pano.png"]).0);
+    let render = |from: Option<&str>, out: &str| {
+        let mut a = vec![
+            "render",
+            "--content",
+            "pano.png",
+            "--content-format",
+            "equirect",
+            "--rig",
+            rig,
+            "--channel",
+            "centre",
+            "--out",
+            out,
+        ];
+        if let Some(f) = from {
+            a.extend(["--project-from", f]);
+        }
+        run(&a)
+    };
+    let (ok, err) = render(None, "plain.png");
+    assert!(ok, "{err}");
+    let (ok, err) = render(Some("0.5,0.3,-0.4"), "moved.png");
+    assert!(ok, "{err}");
+    let (ok, err) = render(Some("0,0,0"), "viewer.png");
+    assert!(ok, "{err}");
+    let read = |f: &str| common::read_u8(&dir.path().join(f));
+    let (plain, moved, viewer) = (read("plain.png"), read("moved.png"), read("viewer.png"));
+    assert!(
+        plain.data == viewer.data,
+        "viewer mode differs from the plain render"
+    );
+    let moved_db = psnr(&plain, &moved, 255.0, |_, _| true);
+    assert!(
+        moved_db < 30.0,
+        "a centre 0.7 m off changed little: {moved_db} dB"
+    );
+    for (bad, says) in [
+        ("3,0,0", "outside the cylinder"),
+        ("0,0,-2", "on the wall"),
+        ("1,2", ""),
+    ] {
+        let (ok, err) = render(Some(bad), "bad.png");
+        assert!(
+            !ok && err.contains("--project-from") && err.contains(says),
+            "{bad}: {err}"
+        );
+        assert!(!dir.path().join("bad.png").exists());
+    }
+    // The eye's view of the wall, and the 2d exports, follow the centre too.
+    let (ok, err) = run(&[
+        "render",
+        "--content",
+        "pano.png",
+        "--content-format",
+        "equirect",
+        "--rig",
+        rig,
+        "--projection",
+        "cylindrical",
+        "--hfov",
+        "270",
+        "--vfov",
+        "90",
+        "--size",
+        "270x90",
+        "--project-from",
+        "0.5,0.3,-0.4",
+        "--out",
+        "view.png",
+    ]);
+    assert!(ok, "{err}");
+    let export = |from: &str, out: &str| {
+        run(&[
+            "export",
+            "--rig",
+            rig,
+            "--channel",
+            "centre",
+            "--format",
+            "stmap",
+            "--projection",
+            "equirect",
+            "--hfov",
+            "360",
+            "--vfov",
+            "180",
+            "--content-size",
+            "512x256",
+            "--project-from",
+            from,
+            "--out",
+            out,
+        ])
+    };
+    assert!(export("0,0,0", "a.exr").0 && export("0.5,0.3,-0.4", "b.exr").0);
+    let uv = |f: &str| {
+        omniwarp::image_io::read_exr_rgba(&dir.path().join(f))
+            .unwrap()
+            .0
+            .data
+    };
+    let (a, b) = (uv("a.exr"), uv("b.exr"));
+    let moved = a
+        .iter()
+        .zip(&b)
+        .filter(|(p, q)| (p[0] - q[0]).abs() > 1e-3)
+        .count();
+    assert!(
+        moved > a.len() / 2,
+        "the ST-map ignores --project-from: {moved} moved"
+    );
 }
