@@ -470,6 +470,43 @@ fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
         );
         assert!(!dir.path().join("bad.png").exists());
     }
+    // Seed 001's residual split is a lookup for cylindrical panoramas only.
+    let (ok, err) = run(&[
+        "render",
+        "--content",
+        "pano.png",
+        "--content-format",
+        "equirect",
+        "--content-lookup",
+        "residual",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "64x48",
+        "--out",
+        "r.png",
+    ]);
+    assert!(!ok && err.contains("--content-lookup"), "{err}");
+    let (ok, err) = run(&[
+        "render",
+        "--content",
+        "pano.png",
+        "--content-format",
+        "cylindrical",
+        "--content-lookup",
+        "residual",
+        "--projection",
+        "flat",
+        "--hfov",
+        "90",
+        "--size",
+        "64x48",
+        "--out",
+        "r.png",
+    ]);
+    assert!(ok, "{err}");
     // The eye's view of the wall, and the 2d exports, follow the centre too.
     let (ok, err) = run(&[
         "render",

@@ -120,6 +120,32 @@ pub struct ContentArgs {
     /// pitch up, roll clockwise).
     #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
     pub content_rotate: DVec3,
+    /// How a cylindrical panorama is looked up: exact (atan2 per sample), residual (seed 001's
+    /// linear part plus a 256×256 residual table: within 0.004 texel) or residual8 (the seed's
+    /// 8-bit residuals: about half a texel off).
+    #[arg(long, value_enum, default_value = "exact")]
+    pub content_lookup: ContentLookup,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ContentLookup {
+    Exact,
+    Residual,
+    Residual8,
+}
+
+impl ContentLookup {
+    /// Applies the lookup to loaded content.
+    pub fn apply<T: omniwarp::raster::Pixel>(
+        self,
+        c: omniwarp::content::Content<T>,
+    ) -> Result<omniwarp::content::Content<T>> {
+        match self {
+            ContentLookup::Exact => Ok(c),
+            ContentLookup::Residual => c.with_residual_split(None).map_err(flag_error),
+            ContentLookup::Residual8 => c.with_residual_split(Some(8)).map_err(flag_error),
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]

@@ -38,21 +38,28 @@ pub fn load_content(a: &ContentArgs, want_float: bool) -> Result<AnyContent> {
             .map_err(flag_error)?;
     let fmt = format.format();
     let (hfov, vfov) = (a.content_hfov, a.content_vfov);
+    let lookup = a.content_lookup;
     let content = match loaded {
         Loaded::U8(r) if !want_float => AnyContent::U8(
-            Content::from_image(&r, fmt, hfov, vfov)
-                .map_err(flag_error)?
-                .with_orientation(orient),
+            lookup.apply(
+                Content::from_image(&r, fmt, hfov, vfov)
+                    .map_err(flag_error)?
+                    .with_orientation(orient),
+            )?,
         ),
         Loaded::U8(r) => AnyContent::F32(
-            Content::from_image(&r.map(to_float), fmt, hfov, vfov)
-                .map_err(flag_error)?
-                .with_orientation(orient),
+            lookup.apply(
+                Content::from_image(&r.map(to_float), fmt, hfov, vfov)
+                    .map_err(flag_error)?
+                    .with_orientation(orient),
+            )?,
         ),
         Loaded::F32(r) => AnyContent::F32(
-            Content::from_image(&r, fmt, hfov, vfov)
-                .map_err(flag_error)?
-                .with_orientation(orient),
+            lookup.apply(
+                Content::from_image(&r, fmt, hfov, vfov)
+                    .map_err(flag_error)?
+                    .with_orientation(orient),
+            )?,
         ),
     };
     Ok(content)

@@ -3,7 +3,8 @@
 //! lavapipe where there is no GPU) or the CPU.
 
 use super::args::{
-    ContentArgs, FilterArg, ProjectionArgs, check_ext, filter, flag_error, parse_size, parse_vec3,
+    ContentArgs, ContentLookup, FilterArg, ProjectionArgs, check_ext, filter, flag_error,
+    parse_size, parse_vec3,
 };
 use super::io::{
     AnyContent, AnyRaster, channel, is_exr, load_content, read_rig, read_tiles, write_output,
@@ -74,6 +75,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if let Some(spec) = &a.scene.scene {
         let (w, h) = a.size.context("--size: needed with --scene")?;
         let view = a.projection.view(w, h)?;
+        if a.content.content_lookup != ContentLookup::Exact {
+            bail!("--content-lookup: the scene renderers look panoramas up exactly");
+        }
         let panorama = match &a.content.content {
             Some(_) => Some(Projected {
                 content: match load_content(&a.content, false)? {

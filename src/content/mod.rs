@@ -15,6 +15,7 @@
 mod atlas;
 pub mod pattern;
 pub mod projective;
+pub mod residual;
 
 pub use atlas::{Atlas, PAD};
 
@@ -52,6 +53,9 @@ pub struct Content<T> {
     atlas: Atlas<T>,
     kind: Kind,
     orientation: Orientation,
+    /// A cylindrical panorama looked up by seed 001's linear + residual split instead of
+    /// exactly ([`Content::with_residual_split`]).
+    split: Option<std::sync::Arc<residual::ResidualSplit>>,
 }
 
 /// Where a direction falls in the atlas: continuous texel coordinates, integers at texel
@@ -84,6 +88,7 @@ impl<T: Pixel> Content<T> {
             atlas: Atlas::cube(cube),
             kind: Kind::Cube { n: cube.size },
             orientation: Orientation::default(),
+            split: None,
         }
     }
 
@@ -102,6 +107,7 @@ impl<T: Pixel> Content<T> {
                 vertical: Vertical::Equirect { vfov },
             },
             orientation: Orientation::default(),
+            split: None,
         })
     }
 
@@ -127,7 +133,32 @@ impl<T: Pixel> Content<T> {
                 },
             },
             orientation: Orientation::default(),
+            split: None,
         })
+    }
+
+    /// Looks a cylindrical panorama up by seed 001's split into a linear part and a residual
+    /// table ([`residual`]), with the residuals in f32 or quantised to `bits`; an error for
+    /// any other content.
+    pub fn with_residual_split(mut self, bits: Option<u32>) -> Result<Self> {
+        let Kind::Panorama {
+            vertical: Vertical::Cylinder { h },
+            ..
+        } = self.kind
+        else {
+            return Err(Error::invalid(
+                "content-lookup",
+                "the residual split is seed 001's lookup for cylindrical panoramas only",
+            ));
+        };
+        if bits.is_some_and(|b| !(2..=16).contains(&b)) {
+            return Err(Error::invalid(
+                "content-lookup",
+                "residual bits must be 2–16",
+            ));
+        }
+        self.split = Some(std::sync::Arc::new(residual::ResidualSplit::new(h, bits)));
+        Ok(self)
     }
 
     /// Turns the content: a direction d of the world shows the content's C⁻¹·d.
@@ -211,15 +242,24 @@ impl<T: Pixel> Locate for Content<T> {
                 hfov,
                 vertical,
             } => {
-                let u = 0.5 + d.x.atan2(-d.z) / hfov;
-                let rho = d.x.hypot(d.z);
-                let v = match vertical {
-                    Vertical::Equirect { vfov } => 0.5 - d.y.atan2(rho) / vfov,
-                    Vertical::Cylinder { h } => {
-                        if rho == 0.0 {
-                            return None;
-                        }
-                        0.5 - d.y / (rho * h)
+                let (u, v) = match &self.split {
+                    Some(split) => {
+                        let (theta, up) = split.angles(d)?;
+                        (0.5 + theta / hfov, 0.5 - up)
+                    }
+                    None => {
+                        let u = 0.5 + d.x.atan2(-d.z) / hfov;
+                        let rho = d.x.hypot(d.z);
+                        let v = match vertical {
+                            Vertical::Equirect { vfov } => 0.5 - d.y.atan2(rho) / vfov,
+                            Vertical::Cylinder { h } => {
+                                if rho == 0.0 {
+                                    return None;
+                                }
+                                0.5 - d.y / (rho * h)
+                            }
+                        };
+                        (u, v)
                     }
                 };
                 if !(0.0..=1.0).contains(&u) || !(0.0..=1.0).contains(&v) {

@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod chart;
 pub mod gpu;
 pub mod lens;
+pub mod panorama;
 pub mod rig;
 pub mod serve;
 pub mod store;
@@ -31,6 +32,9 @@ pub enum BenchCommand {
     /// 3D scenes through the GPU renderer against cube-face size, with and without CMF, beside
     /// the CPU reference (seed 000, Figure 8).
     Gpu(gpu::GpuBenchArgs),
+    /// Seed 001's frame-rate table: a cubic and a cylindrical panorama projected onto a scene,
+    /// viewer mode and from another centre, 640×480 and 1024×768, beside the seed's figures.
+    Panorama(panorama::PanoramaBenchArgs),
     /// The daemon over loopback: tile edits per second and latency with many clients, and 1080p
     /// preview latency while they edit.
     Serve(serve::ServeBenchArgs),
@@ -52,6 +56,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Warp(a) => warp::run(a),
         BenchCommand::Rig { rig } => rig::run(&rig),
         BenchCommand::Gpu(a) => gpu::run(a),
+        BenchCommand::Panorama(a) => panorama::run(a),
         BenchCommand::Serve(a) => serve::run(a),
         BenchCommand::Store(a) => store::run(a),
         BenchCommand::Calibrate => calibrate::run(),
