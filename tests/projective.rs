@@ -28,13 +28,18 @@ const PLANE: &str =
 
 /// A rig with one 64×48 pinhole projector beside the eye, looking where `look_to` says.
 fn rig(screen: &str, eye: [f64; 3], look_to: [f64; 3]) -> Rig {
+    rig_at(screen, eye, look_to, Path::new("."))
+}
+
+/// [`rig`] with its files (a mesh screen's OBJ) relative to `base`.
+fn rig_at(screen: &str, eye: [f64; 3], look_to: [f64; 3], base: &Path) -> Rig {
     let text = format!(
         r#"{{ "format": 1, "screen": {screen}, "eye": {eye:?}, "channels": [
             {{ "id": "p", "resolution": [64, 48],
                "lens": {{ "model": "LENSMODEL_PINHOLE", "intrinsics": [30, 30, 31.5, 23.5] }},
                "pose": {{ "position": [0.1, -0.1, 0.05], "look_to": {look_to:?}, "look_up": [0, 1, 0] }} }} ] }}"#
     );
-    Rig::from_json(&text, Path::new(".")).unwrap()
+    Rig::from_json(&text, base).unwrap()
 }
 
 fn angle(a: DVec3, b: DVec3) -> f64 {
@@ -215,6 +220,25 @@ fn bad_centres_are_named_errors() {
             "{screen} {c:?}: {text}"
         );
     }
+    // A mesh wall: behind it as the eye sees it, and on it.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("wall.obj"),
+        "v -3 -2 -3\nv 3 -2 -3\nv 3 2 -3\nv -3 2 -3\nf 1 2 3\nf 1 3 4\n",
+    )
+    .unwrap();
+    let screen = r#"{ "kind": "mesh", "obj": "wall.obj" }"#;
+    let mesh = rig_at(screen, [0.0; 3], [0.0, 0.0, -1.0], dir.path());
+    for (c, says) in [
+        ([0.0, 0.0, -4.0], "behind the mesh"),
+        ([0.5, 0.2, -2.9995], "on the wall"),
+    ] {
+        let e = mesh
+            .check_centre(DVec3::from_array(c), "project-from")
+            .expect_err(&format!("mesh: {c:?} accepted"));
+        assert!(e.to_string().contains(says), "mesh {c:?}: {e}");
+    }
+    mesh.check_centre(DVec3::new(0.5, 0.2, -1.0), "c").unwrap();
     // Inside is fine, the eye included.
     for screen in [CYLINDER, DOME, PLANE] {
         let rig = rig(screen, [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]);

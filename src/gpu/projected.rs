@@ -5,8 +5,7 @@
 //! (`fs_projected` in `shaders/scene.wgsl`). The CPU twin: `RayCaster::cube_projected`.
 
 use super::Gpu;
-use super::cube::scene_pipeline;
-use super::pass::{entry, texture, uniform};
+use super::pass::{entry, scene_pipeline, texture, uniform};
 use crate::content::PAD;
 use crate::error::{Error, Result};
 use crate::scene::Projected;
