@@ -260,6 +260,13 @@ fn gpu_and_cpu_project_the_same_panorama_onto_a_scene() {
     };
     let rig_path =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/dome-180-tilt15-5proj.json");
+    let opts = |eye| FrameOptions {
+        size: (w, h),
+        face: Some(384),
+        cmf: true,
+        blur: None,
+        eye,
+    };
     let scenes = [
         (
             format!("wall:{}", rig_path.display()),
@@ -281,14 +288,7 @@ fn gpu_and_cpu_project_the_same_panorama_onto_a_scene() {
                 centre,
             }))
             .unwrap();
-            let opts = FrameOptions {
-                size: (w, h),
-                face: Some(384),
-                cmf: true,
-                blur: None,
-                eye,
-            };
-            images.push(r.frame(&view, &opts).unwrap().0);
+            images.push(r.frame(&view, &opts(eye)).unwrap().0);
         }
         let db = psnr(&images[0], &images[1], 255.0, |_, _| true);
         eprintln!("{spec}: projected panorama, GPU vs CPU {db:.1} dB");
@@ -303,14 +303,7 @@ fn gpu_and_cpu_project_the_same_panorama_onto_a_scene() {
             centre: eye,
         }))
         .unwrap();
-        let opts = FrameOptions {
-            size: (w, h),
-            face: Some(384),
-            cmf: true,
-            blur: None,
-            eye,
-        };
-        let viewer = r.frame(&view, &opts).unwrap().0;
+        let viewer = r.frame(&view, &opts(eye)).unwrap().0;
         let apart = psnr(&viewer, &images[1], 255.0, |_, _| true);
         assert!(
             apart < 30.0,
@@ -495,41 +488,29 @@ fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
         assert!(!dir.path().join("bad.png").exists());
     }
     // Seed 001's residual split is a lookup for cylindrical panoramas only.
-    let (ok, err) = run(&[
-        "render",
-        "--content",
-        "pano.png",
-        "--content-format",
-        "equirect",
-        "--content-lookup",
-        "residual",
-        "--projection",
-        "flat",
-        "--hfov",
-        "90",
-        "--size",
-        "64x48",
-        "--out",
-        "r.png",
-    ]);
+    let residual = |format: &str| {
+        let out = "r.png";
+        run(&[
+            "render",
+            "--content",
+            "pano.png",
+            "--content-format",
+            format,
+            "--content-lookup",
+            "residual",
+            "--projection",
+            "flat",
+            "--hfov",
+            "90",
+            "--size",
+            "64x48",
+            "--out",
+            out,
+        ])
+    };
+    let (ok, err) = residual("equirect");
     assert!(!ok && err.contains("--content-lookup"), "{err}");
-    let (ok, err) = run(&[
-        "render",
-        "--content",
-        "pano.png",
-        "--content-format",
-        "cylindrical",
-        "--content-lookup",
-        "residual",
-        "--projection",
-        "flat",
-        "--hfov",
-        "90",
-        "--size",
-        "64x48",
-        "--out",
-        "r.png",
-    ]);
+    let (ok, err) = residual("cylindrical");
     assert!(ok, "{err}");
     // The eye's view of the wall, and the 2d exports, follow the centre too.
     let (ok, err) = run(&[

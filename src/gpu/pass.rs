@@ -40,29 +40,53 @@ pub(super) fn fullscreen(
             label: None,
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
+    rgba8_pipeline(gpu, &module, &[layout], ["vs_main", "fs_main"], &[], None)
+}
+
+/// A pipeline of `module`'s `entries` (vertex, fragment) writing RGBA8, both sides of every
+/// triangle drawn (the cube faces' matrices mirror), with a Depth32Float test when `depth`
+/// says whether to write and how to compare.
+pub(super) fn rgba8_pipeline(
+    gpu: &Gpu,
+    module: &wgpu::ShaderModule,
+    layouts: &[&wgpu::BindGroupLayout],
+    entries: [&str; 2],
+    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+    depth: Option<(bool, wgpu::CompareFunction)>,
+) -> wgpu::RenderPipeline {
+    let layouts: Vec<_> = layouts.iter().map(|l| Some(*l)).collect();
     let pl = gpu
         .device
         .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: None,
-            bind_group_layouts: &[Some(layout)],
+            bind_group_layouts: &layouts,
             immediate_size: 0,
         });
     gpu.device
         .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: None,
+            label: Some(entries[1]),
             layout: Some(&pl),
             vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
+                module,
+                entry_point: Some(entries[0]),
                 compilation_options: Default::default(),
-                buffers: &[],
+                buffers,
             },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
+            primitive: wgpu::PrimitiveState {
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: depth.map(|(write, compare)| wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(write),
+                depth_compare: Some(compare),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
+                module,
+                entry_point: Some(entries[1]),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
                     format: wgpu::TextureFormat::Rgba8Unorm,
@@ -128,67 +152,26 @@ pub(super) fn draw(
     gpu.queue.submit([enc.finish()]);
 }
 
-/// A pipeline drawing the scene's triangles into a cube face with depth, fragment shader
-/// `fs` of the scene module.
+/// A pipeline drawing the scene's triangles (positions, colours) into a cube face with depth,
+/// fragment shader `fs` of the scene module.
 pub(super) fn scene_pipeline(
     gpu: &Gpu,
     module: &wgpu::ShaderModule,
     layouts: &[&wgpu::BindGroupLayout],
     fs: &str,
 ) -> wgpu::RenderPipeline {
-    let layouts: Vec<_> = layouts.iter().map(|l| Some(*l)).collect();
-    let pl = gpu
-        .device
-        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: None,
-            bind_group_layouts: &layouts,
-            immediate_size: 0,
-        });
-    gpu.device
-        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some(fs),
-            layout: Some(&pl),
-            vertex: wgpu::VertexState {
-                module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[
-                    Some(wgpu::VertexBufferLayout {
-                        array_stride: 12,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                    }),
-                    Some(wgpu::VertexBufferLayout {
-                        array_stride: 4,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![1 => Unorm8x4],
-                    }),
-                ],
-            },
-            // The face matrices mirror (the table is left-handed): draw both sides.
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: wgpu::TextureFormat::Depth32Float,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module,
-                entry_point: Some(fs),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::Rgba8Unorm,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        })
+    let buffers = [
+        Some(wgpu::VertexBufferLayout {
+            array_stride: 12,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+        }),
+        Some(wgpu::VertexBufferLayout {
+            array_stride: 4,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &wgpu::vertex_attr_array![1 => Unorm8x4],
+        }),
+    ];
+    let depth = Some((true, wgpu::CompareFunction::Less));
+    rgba8_pipeline(gpu, module, layouts, ["vs_main", fs], &buffers, depth)
 }

@@ -5,7 +5,7 @@
 //! (`fs_projected` in `shaders/scene.wgsl`). The CPU twin: `RayCaster::cube_projected`.
 
 use super::Gpu;
-use super::pass::{entry, scene_pipeline, texture, uniform};
+use super::pass::{entry, rgba8_pipeline, scene_pipeline, texture, uniform};
 use crate::content::PAD;
 use crate::error::{Error, Result};
 use crate::scene::Projected;
@@ -157,44 +157,6 @@ fn sky_pipeline(
     module: &wgpu::ShaderModule,
     layouts: &[&wgpu::BindGroupLayout],
 ) -> wgpu::RenderPipeline {
-    let layouts: Vec<_> = layouts.iter().map(|l| Some(*l)).collect();
-    let pl = gpu
-        .device
-        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: None,
-            bind_group_layouts: &layouts,
-            immediate_size: 0,
-        });
-    gpu.device
-        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("sky"),
-            layout: Some(&pl),
-            vertex: wgpu::VertexState {
-                module,
-                entry_point: Some("vs_sky"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: Default::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: wgpu::TextureFormat::Depth32Float,
-                depth_write_enabled: Some(false),
-                depth_compare: Some(wgpu::CompareFunction::Always),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module,
-                entry_point: Some("fs_sky"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::Rgba8Unorm,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        })
+    let depth = Some((false, wgpu::CompareFunction::Always));
+    rgba8_pipeline(gpu, module, layouts, ["vs_sky", "fs_sky"], &[], depth)
 }
