@@ -95,10 +95,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
         };
         return render_scene(spec, &a.scene, panorama, &view, (w, h), &a.out);
     }
+    if let (Some(renderer), Some(rig), Some(id)) = (a.scene.renderer, &a.rig, &a.channel) {
+        return render_channel_on_wall(&a, renderer, rig, id);
+    }
     if let Some(RendererArg::Gpu) = a.scene.renderer {
         bail!(
-            "--renderer: gpu renders 3D scenes (--scene) only; content renders run on the CPU \
-             reference path (leave --renderer out, or say cpu)"
+            "--renderer: gpu renders 3D scenes (--scene) and rig channels (--rig, --channel) \
+             only; other content renders run on the CPU reference path (leave --renderer out)"
         );
     }
     let mut mask = None;
@@ -212,6 +215,58 @@ pub fn render_inputs(
         None => w.map,
     };
     Ok((map, mask))
+}
+
+/// A rig channel through the scene renderers (`--renderer`): the wall as triangles with the
+/// content panorama projected onto it (from `--project-from`, or the eye) drawn into the eye's
+/// cube map, then sampled through the channel's warp — seed 000's pipeline, on the GPU or its
+/// CPU twin — with the blend mask applied as in the exact path.
+fn render_channel_on_wall(
+    a: &RenderArgs,
+    renderer: RendererArg,
+    path: &Path,
+    id: &str,
+) -> Result<()> {
+    if a.content.content_lookup != ContentLookup::Exact {
+        bail!("--content-lookup: the scene renderers look panoramas up exactly");
+    }
+    if a.supersample != 1 || !matches!(a.filter, FilterArg::Bilinear) {
+        bail!("--renderer: the scene renderers filter bilinearly, one sample per pixel");
+    }
+    let rig = read_rig(path)?;
+    let centre = rig
+        .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
+        .map_err(flag_error)?;
+    let content = match load_content(&a.content, false)? {
+        AnyContent::U8(c) => c,
+        AnyContent::F32(_) => bail!("--content: the scene renderers take 8-bit panoramas"),
+    };
+    let ch = channel(&rig, id)?;
+    let warp = rig.warp(ch);
+    let scene = Scene::from_triangles(&rig.doc.screen.triangles());
+    let mut r = SceneRenderer::new(scene, renderer.renderer(), a.scene.adapter.as_deref())
+        .map_err(flag_error)?;
+    r.set_panorama(Some(Projected { content, centre }))
+        .map_err(flag_error)?;
+    let opts = FrameOptions {
+        size: (ch.width, ch.height),
+        face: a.scene.face,
+        cmf: !a.scene.all_faces,
+        blur: None,
+        eye: rig.eye,
+    };
+    let (mut img, report) = r.frame_map(&warp.map, &opts).map_err(flag_error)?;
+    eprintln!("{}: cube faces at {}²", r.describe(), report.face);
+    for (p, &w) in img
+        .data
+        .iter_mut()
+        .zip(&rig.blend_weights(ch, &warp.points))
+    {
+        let k = f64::from(w).powf(1.0 / a.gamma) as f32;
+        let v = p.to_f32().map(|c| c * k);
+        *p = <[u8; 4]>::from_f32([v[0], v[1], v[2], p[3] as f32]);
+    }
+    write_output(&a.out, AnyRaster::U8(img), &[])
 }
 
 #[derive(Clone, Copy, ValueEnum)]

@@ -169,6 +169,37 @@ impl SceneRenderer {
         view: &View,
         o: &FrameOptions,
     ) -> Result<(Raster<[u8; 4]>, FrameReport)> {
+        self.frame_from(Source::View(view), o)
+    }
+
+    /// A frame through a warp map instead of a view: a projector channel's warp (directions
+    /// from the eye) samples the scene's cube map as seed 000's warp pass does. The map's size
+    /// is the output's.
+    pub fn frame_map(
+        &mut self,
+        map: &NormalMap,
+        o: &FrameOptions,
+    ) -> Result<(Raster<[u8; 4]>, FrameReport)> {
+        if (map.width(), map.height()) != (o.size.0 as usize, o.size.1 as usize) {
+            return Err(Error::invalid(
+                "size",
+                format!(
+                    "the warp map is {}×{}, the frame {}×{}",
+                    map.width(),
+                    map.height(),
+                    o.size.0,
+                    o.size.1
+                ),
+            ));
+        }
+        self.frame_from(Source::Map(map), o)
+    }
+
+    fn frame_from(
+        &mut self,
+        source: Source<'_>,
+        o: &FrameOptions,
+    ) -> Result<(Raster<[u8; 4]>, FrameReport)> {
         let (w, h) = o.size;
         let max = match &self.backend {
             Backend::Gpu { gpu, .. } => gpu.device.limits().max_texture_dimension_2d.min(8192),
@@ -182,19 +213,33 @@ impl SceneRenderer {
                 format!("must be 8–{max} on this renderer, got {f}"),
             ));
         }
-        // The view's sampling vectors decide the face size and the faces; they are computed
-        // once per view, not per frame.
-        let key = bytemuck::bytes_of(&ProjectionUniform::of(view, w, h)).to_vec();
+        // The sampling vectors decide the face size and the faces; for a view they are
+        // computed once, not per frame (a warp map is decided on each call).
+        let key = match source {
+            Source::View(view) => bytemuck::bytes_of(&ProjectionUniform::of(view, w, h)).to_vec(),
+            Source::Map(_) => Vec::new(),
+        };
         let (face, faces) = match &self.plan {
-            Some((k, f, c, decided)) if *k == key && *f == o.face && *c == o.cmf => *decided,
+            Some((k, f, c, decided))
+                if !key.is_empty() && *k == key && *f == o.face && *c == o.cmf =>
+            {
+                *decided
+            }
             _ => {
                 let decided = if let (Some(face), false) = (o.face, o.cmf) {
                     (face, [true; 6])
                 } else {
-                    let map = NormalMap::from_view(view, w, h)?;
-                    let face = o.face.unwrap_or_else(|| face_size_for(&map, max));
+                    let from_view;
+                    let map = match source {
+                        Source::View(view) => {
+                            from_view = NormalMap::from_view(view, w, h)?;
+                            &from_view
+                        }
+                        Source::Map(map) => map,
+                    };
+                    let face = o.face.unwrap_or_else(|| face_size_for(map, max));
                     let faces = if o.cmf {
-                        faces_sampled(&map, face)
+                        faces_sampled(map, face)
                     } else {
                         [true; 6]
                     };
@@ -216,7 +261,7 @@ impl SceneRenderer {
                 }
                 let t = target.as_ref().expect("set above");
                 let updated = cube.render(gpu, t, o.eye, faces);
-                let img = warp.render(gpu, t, Source::View(view), (w, h), None, o.blur)?;
+                let img = warp.render(gpu, t, source, (w, h), None, o.blur)?;
                 Ok((
                     img,
                     FrameReport {
@@ -243,14 +288,12 @@ impl SceneRenderer {
                     *cached = Some((key, cube));
                 }
                 let cube = &cached.as_ref().expect("set above").1;
-                let mut img = render::render(
-                    Warp::View(view),
-                    &Content::cube(cube),
-                    w,
-                    h,
-                    1,
-                    Filter::Bilinear,
-                )?;
+                let warp = match source {
+                    Source::View(view) => Warp::View(view),
+                    Source::Map(map) => Warp::Map(map),
+                };
+                let mut img =
+                    render::render(warp, &Content::cube(cube), w, h, 1, Filter::Bilinear)?;
                 if let Some(b) = o.blur {
                     img = radial_blur(&img, b);
                 }

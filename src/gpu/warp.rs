@@ -44,6 +44,7 @@ impl ProjectionUniform {
 }
 
 /// Where the sampling vectors come from.
+#[derive(Clone, Copy)]
 pub enum Source<'a> {
     View(&'a View),
     Map(&'a NormalMap),
