@@ -221,9 +221,44 @@ fn look_to_parallel_to_look_up() -> Vec<(String, Measured)> {
     )]
 }
 
+/// A panorama projected from a centre C near the wall (seed 001): the eye's neighbouring rays
+/// meet the near wall a small distance from C, so one output pixel spans |P − eye|/|P − C| times
+/// its own angle of the panorama (more than a bilinear tap can average: aliasing), while the far
+/// wall spans less (blur). Straight ahead of a 2 m cylinder's axis with C 1.8 m ahead: 10× and
+/// 2/3.8 = 0.53×.
+fn projection_centre_near_the_wall() -> Vec<(String, Measured)> {
+    let text = r#"{ "format": 1, "screen": { "kind": "cylinder", "radius": 2.0, "height": [-2, 2] },
+        "eye": [0, 0, 0], "channels": [ { "id": "p", "resolution": [8, 8],
+        "lens": { "model": "LENSMODEL_PINHOLE", "intrinsics": [4, 4, 3.5, 3.5] },
+        "pose": { "position": [0, 0, 0], "look_to": [0, 0, -1], "look_up": [0, 1, 0] } } ] }"#;
+    let rig = omniwarp::rig::Rig::from_json(text, Path::new(".")).unwrap();
+    let c = rig.check_centre(DVec3::new(0.0, 0.0, -1.8), "c").unwrap();
+    let mut out = Vec::new();
+    for (ahead, expected) in [(DVec3::NEG_Z, 10.0), (DVec3::Z, 2.0 / 3.8)] {
+        // Two eye rays 1e-4 rad apart, sideways, and the panorama angle between what they show.
+        let side = ahead.cross(DVec3::Y) * 1e-4;
+        let from = omniwarp::content::projective::Projective {
+            surface: &rig.doc.screen,
+            eye: rig.eye,
+            centre: c,
+        };
+        let v = |d: DVec3| from.direction(d.normalize());
+        let spread = v(ahead).angle_between(v(ahead + side)) / 1e-4;
+        out.push((
+            format!("C 0.2 m from the wall, looking {ahead}: {spread:.3}× the eye's angle (expected {expected:.3})"),
+            at_most((spread / expected - 1.0).abs(), 1e-3, "relative"),
+        ));
+    }
+    out
+}
+
 type Row = (&'static str, fn() -> Vec<(String, Measured)>);
 
-const ROWS: [Row; 6] = [
+const ROWS: [Row; 7] = [
+    (
+        "projection_centre_near_the_wall",
+        projection_centre_near_the_wall,
+    ),
     ("f16_maps_at_4k_and_8k", f16_maps_at_4k_and_8k),
     ("cylinder_vfov_towards_180", cylinder_vfov_towards_180),
     ("fisheye_towards_360", fisheye_towards_360),
