@@ -12,7 +12,6 @@
 //! other geometry still shows the panorama's direction towards it. The wall surfaces (inside of
 //! a cylinder or a dome, a plane) are seen whole from any centre inside them.
 
-use crate::normalmap::NormalMap;
 use crate::raster::Raster;
 use crate::surface::{Mesh, Screen};
 use glam::DVec3;
@@ -58,20 +57,6 @@ impl Projective<'_> {
     /// The panorama direction of surface point `p`; `None` at the centre itself.
     pub fn of_point(&self, p: DVec3) -> Option<DVec3> {
         (p - self.centre).try_normalize()
-    }
-
-    /// A normal map of panorama directions for the eye rays of `rays` (a map of unit world
-    /// directions): pixels the map does not cover stay uncovered. Rows in parallel; `None`
-    /// once `cancel` is set.
-    pub fn map(&self, rays: &NormalMap, cancel: &AtomicBool) -> Option<NormalMap> {
-        let (w, h) = (rays.width(), rays.height());
-        map_pixels(w, h, cancel, |i, j| {
-            rays.direction(i, j).map(|d| self.direction(d))
-        })
-        .map(|pixels| {
-            NormalMap::from_pixels(pixels, rays.attributes.clone())
-                .expect("unit vectors and 0/1 validity")
-        })
     }
 }
 

@@ -3,6 +3,7 @@
 //! face table, same sun, same sky, so the two agree to rounding where both see one triangle.
 
 use super::{Projected, SKY, sun};
+use crate::content::projective::Projective;
 use crate::cubemap::CubeMap;
 use crate::surface::Mesh;
 use glam::DVec3;
@@ -27,18 +28,17 @@ impl RayCaster {
         on: [bool; 6],
         p: &Projected,
     ) -> CubeMap<[u8; 4]> {
-        CubeMap::from_fn_on(face, 1, on, |d| {
-            let towards = match self.mesh.first_hit(eye, d) {
-                Some((t, _, _)) => (eye + d * t - p.centre).try_normalize().unwrap_or(d),
-                None => d,
-            };
-            match p.content.sample(towards) {
-                Some(c) => {
-                    let f = |v: f32| v.round().clamp(0.0, 255.0) as u8;
-                    [f(c[0]), f(c[1]), f(c[2]), 255]
-                }
-                None => [0, 0, 0, 255],
+        let from = Projective {
+            surface: &self.mesh,
+            eye,
+            centre: p.centre,
+        };
+        CubeMap::from_fn_on(face, 1, on, |d| match p.content.sample(from.direction(d)) {
+            Some(c) => {
+                let f = |v: f32| v.round().clamp(0.0, 255.0) as u8;
+                [f(c[0]), f(c[1]), f(c[2]), 255]
             }
+            None => [0, 0, 0, 255],
         })
     }
 
