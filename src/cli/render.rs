@@ -115,6 +115,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
             let (w, h) = a
                 .size
                 .context("--size: needed for the eye's view of a rig (--rig without --channel)")?;
+            if a.projection.projection.is_none() {
+                bail!("--projection: needed for the eye's view of a rig (or give --channel)");
+            }
             let rig = read_rig(path)?;
             let centre = rig
                 .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
