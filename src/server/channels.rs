@@ -2,10 +2,11 @@
 //! revision (`ETag`, `If-Match`, 412 with the current one when stale).
 
 use super::ApiError;
+use super::canvas::Canvas;
 use super::db::Meta;
 use super::jobs::run_write;
 use super::state::{AppState, AtRevision, Query, document_at, if_match, meta, parse_body, tagged};
-use super::store::{Canvas, ChannelData, Versioned, content_resource, tiles_resource};
+use super::store::{ChannelData, Versioned, content_resource, tiles_resource};
 use crate::rig::{Channel, Rig};
 use crate::tiles::build::{extend_past_edge, grid_of};
 use crate::tiles::edit::Edit;

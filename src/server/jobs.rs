@@ -4,8 +4,8 @@
 
 use super::ApiError;
 use super::cache::{Computed, Geometry};
+use super::canvas::Canvas;
 use super::state::AppState;
-use super::store::Canvas;
 use crate::rig::Rig;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -6,6 +6,7 @@
 
 mod cache;
 mod calib;
+mod canvas;
 mod channels;
 pub mod client;
 pub mod db;
@@ -22,10 +23,11 @@ mod rig;
 mod state;
 mod store;
 
+pub use canvas::Canvas;
 pub use error::ApiError;
 pub use guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
 pub use state::{AppState, MAX_BODY, Options, STREAMS, WORKERS};
-pub use store::{Canvas, ChannelData, OpenOptions, Store};
+pub use store::{ChannelData, OpenOptions, Store};
 
 use axum::Router;
 use axum::extract::{Request, State};
