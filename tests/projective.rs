@@ -439,7 +439,8 @@ fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/rigs/cylinder-270-3proj.json");
     let rig = rig.to_str().unwrap();
     assert!(run(&["pattern", "--size", "512x256", "--out", "pano.png"]).0);
-    let render = |from: Option<&str>, out: &str| {
+    // The centre channel of the demo rig, with `extra` flags.
+    let render = |extra: &[&str], out: &str| {
         let mut a = vec![
             "render",
             "--content",
@@ -453,16 +454,14 @@ fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
             "--out",
             out,
         ];
-        if let Some(f) = from {
-            a.extend(["--project-from", f]);
-        }
+        a.extend(extra);
         run(&a)
     };
-    let (ok, err) = render(None, "plain.png");
+    let (ok, err) = render(&[], "plain.png");
     assert!(ok, "{err}");
-    let (ok, err) = render(Some("0.5,0.3,-0.4"), "moved.png");
+    let (ok, err) = render(&["--project-from", "0.5,0.3,-0.4"], "moved.png");
     assert!(ok, "{err}");
-    let (ok, err) = render(Some("0,0,0"), "viewer.png");
+    let (ok, err) = render(&["--project-from", "0,0,0"], "viewer.png");
     assert!(ok, "{err}");
     let read = |f: &str| common::read_u8(&dir.path().join(f));
     let (plain, moved, viewer) = (read("plain.png"), read("moved.png"), read("viewer.png"));
@@ -480,7 +479,7 @@ fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
         ("0,0,-2", "on the wall"),
         ("1,2", ""),
     ] {
-        let (ok, err) = render(Some(bad), "bad.png");
+        let (ok, err) = render(&["--project-from", bad], "bad.png");
         assert!(
             !ok && err.contains("--project-from") && err.contains(says),
             "{bad}: {err}"
@@ -488,25 +487,15 @@ fn the_command_line_projects_onto_a_rig_and_names_bad_centres() {
         assert!(!dir.path().join("bad.png").exists());
     }
     // The same channel through the scene renderers' pipeline (the CPU twin here, for speed).
-    let (ok, err) = run(&[
-        "render",
-        "--content",
-        "pano.png",
-        "--content-format",
-        "equirect",
-        "--rig",
-        rig,
-        "--channel",
-        "centre",
+    let twin = [
         "--renderer",
         "cpu",
         "--face",
         "256",
         "--project-from",
         "0.5,0.3,-0.4",
-        "--out",
-        "twin.png",
-    ]);
+    ];
+    let (ok, err) = render(&twin, "twin.png");
     assert!(ok, "{err}");
     let twin_db = psnr(&read("twin.png"), &moved, 255.0, |_, _| true);
     assert!(

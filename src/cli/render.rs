@@ -16,9 +16,10 @@ use omniwarp::gpu::Renderer;
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::View;
-use omniwarp::raster::Pixel;
+use omniwarp::raster::{Pixel, Raster};
 use omniwarp::render::blur::Blur;
 use omniwarp::render::{self, Warp};
+use omniwarp::rig::{Channel, Rig};
 use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
 use std::path::{Path, PathBuf};
@@ -75,19 +76,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if let Some(spec) = &a.scene.scene {
         let (w, h) = a.size.context("--size: needed with --scene")?;
         let view = a.projection.view(w, h)?;
-        if a.content.content_lookup != ContentLookup::Exact {
-            bail!("--content-lookup: the scene renderers look panoramas up exactly");
-        }
         let panorama = match &a.content.content {
-            Some(_) => Some(Projected {
-                content: match load_content(&a.content, false)? {
-                    AnyContent::U8(c) => c,
-                    AnyContent::F32(_) => {
-                        bail!("--content: a panorama projected onto a scene is 8-bit (PNG or JPEG)")
-                    }
-                },
-                centre: a.project_from.unwrap_or(a.scene.eye),
-            }),
+            Some(_) => Some(scene_panorama(&a, a.project_from.unwrap_or(a.scene.eye))?),
             None if a.project_from.is_some() => {
                 bail!("--project-from: needs the panorama to project (--content)")
             }
@@ -156,11 +146,6 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let content = load_content(&a.content, is_exr(&a.out))?;
     let (ss, f) = (a.supersample, filter(a.filter));
     let effect = features.as_ref().map(|f| f.f());
-    let scale = |img: &mut [f32; 4], m: f32| {
-        for c in &mut img[..3] {
-            *c *= m;
-        }
-    };
     let img = match &content {
         AnyContent::U8(c) => {
             let mut r = render::render(warp, c, w, h, ss, f).map_err(flag_error)?;
@@ -168,11 +153,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 saturation(&mut r, e);
             }
             if let Some(m) = &mask {
-                for (p, &k) in r.data.iter_mut().zip(m) {
-                    let mut v = p.to_f32();
-                    scale(&mut v, k);
-                    *p = <[u8; 4]>::from_f32(v);
-                }
+                apply_mask(&mut r, m);
             }
             AnyRaster::U8(r)
         }
@@ -182,9 +163,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 saturation(&mut r, e);
             }
             if let Some(m) = &mask {
-                for (p, &k) in r.data.iter_mut().zip(m) {
-                    scale(p, k);
-                }
+                apply_mask(&mut r, m);
             }
             AnyRaster::F32(r)
         }
@@ -203,11 +182,7 @@ pub fn render_inputs(
     let rig = read_rig(path)?;
     let ch = channel(&rig, id)?;
     let w = rig.warp(ch);
-    let mask = rig
-        .blend_weights(ch, &w.points)
-        .iter()
-        .map(|&x| (f64::from(x).powf(1.0 / gamma)) as f32)
-        .collect();
+    let mask = signal_mask(&rig, ch, &w.points, gamma);
     let map = match project_from {
         Some(c) => {
             let c = rig.check_centre(c, "project-from").map_err(flag_error)?;
@@ -220,6 +195,39 @@ pub fn render_inputs(
     Ok((map, mask))
 }
 
+/// The blend weights of a channel's pixels in signal space, m = w^(1/γ).
+fn signal_mask(rig: &Rig, ch: &Channel, points: &[Option<DVec3>], gamma: f64) -> Vec<f32> {
+    rig.blend_weights(ch, points)
+        .iter()
+        .map(|&x| (f64::from(x).powf(1.0 / gamma)) as f32)
+        .collect()
+}
+
+/// Scales each pixel's colour (not its alpha) by its mask value.
+fn apply_mask<T: Pixel>(img: &mut Raster<T>, mask: &[f32]) {
+    for (p, &k) in img.data.iter_mut().zip(mask) {
+        let mut v = p.to_f32();
+        for c in &mut v[..3] {
+            *c *= k;
+        }
+        *p = T::from_f32(v);
+    }
+}
+
+/// The content panorama as the scene renderers take it (8-bit, looked up exactly), projected
+/// from `centre`.
+fn scene_panorama(a: &RenderArgs, centre: DVec3) -> Result<Projected> {
+    if a.content.content_lookup != ContentLookup::Exact {
+        bail!("--content-lookup: the scene renderers look panoramas up exactly");
+    }
+    match load_content(&a.content, false)? {
+        AnyContent::U8(content) => Ok(Projected { content, centre }),
+        AnyContent::F32(_) => {
+            bail!("--content: a panorama projected onto a scene is 8-bit (PNG or JPEG)")
+        }
+    }
+}
+
 /// A rig channel through the scene renderers (`--renderer`): the wall as triangles with the
 /// content panorama projected onto it (from `--project-from`, or the eye) drawn into the eye's
 /// cube map, then sampled through the channel's warp — seed 000's pipeline, on the GPU or its
@@ -230,9 +238,6 @@ fn render_channel_on_wall(
     path: &Path,
     id: &str,
 ) -> Result<()> {
-    if a.content.content_lookup != ContentLookup::Exact {
-        bail!("--content-lookup: the scene renderers look panoramas up exactly");
-    }
     if a.supersample != 1 || !matches!(a.filter, FilterArg::Bilinear) {
         bail!("--renderer: the scene renderers filter bilinearly, one sample per pixel");
     }
@@ -240,17 +245,13 @@ fn render_channel_on_wall(
     let centre = rig
         .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
         .map_err(flag_error)?;
-    let content = match load_content(&a.content, false)? {
-        AnyContent::U8(c) => c,
-        AnyContent::F32(_) => bail!("--content: the scene renderers take 8-bit panoramas"),
-    };
+    let panorama = scene_panorama(a, centre)?;
     let ch = channel(&rig, id)?;
     let warp = rig.warp(ch);
     let scene = Scene::from_triangles(&rig.doc.screen.triangles());
     let mut r = SceneRenderer::new(scene, renderer.renderer(), a.scene.adapter.as_deref())
         .map_err(flag_error)?;
-    r.set_panorama(Some(Projected { content, centre }))
-        .map_err(flag_error)?;
+    r.set_panorama(Some(panorama)).map_err(flag_error)?;
     let opts = FrameOptions {
         size: (ch.width, ch.height),
         face: a.scene.face,
@@ -260,15 +261,7 @@ fn render_channel_on_wall(
     };
     let (mut img, report) = r.frame_map(&warp.map, &opts).map_err(flag_error)?;
     eprintln!("{}: cube faces at {}²", r.describe(), report.face);
-    for (p, &w) in img
-        .data
-        .iter_mut()
-        .zip(&rig.blend_weights(ch, &warp.points))
-    {
-        let k = f64::from(w).powf(1.0 / a.gamma) as f32;
-        let v = p.to_f32().map(|c| c * k);
-        *p = <[u8; 4]>::from_f32([v[0], v[1], v[2], p[3] as f32]);
-    }
+    apply_mask(&mut img, &signal_mask(&rig, ch, &warp.points, a.gamma));
     write_output(&a.out, AnyRaster::U8(img), &[])
 }
 
@@ -365,7 +358,7 @@ fn render_scene(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
     {
-        let f = omniwarp::raster::Raster {
+        let f = Raster {
             width: img.width,
             height: img.height,
             data: img

@@ -22,7 +22,7 @@ pub use atlas::{Atlas, PAD};
 use crate::cubemap::{self, CubeMap};
 use crate::error::{Error, Result, finite};
 use crate::projection::Orientation;
-use crate::raster::{Pixel, Raster};
+use crate::raster::{Pixel, Raster, split};
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -171,31 +171,22 @@ impl<T: Pixel> Content<T> {
         &self.atlas
     }
 
-    /// The content seen in direction `d`, bilinearly filtered (as a plan's bilinear tap reads
-    /// it, to 1/65536 of a texel); `None` where the content does not cover `d`. For one-off
-    /// lookups (a ray caster's shading); images go through a [`crate::render::Plan`].
+    /// The content seen in direction `d`, bilinearly filtered as a plan's bilinear tap reads it
+    /// (the same split into texel and 1/65536 fraction); `None` where the content does not
+    /// cover `d`. For one-off lookups (a ray caster's shading); images go through a
+    /// [`crate::render::Plan`].
     pub fn sample(&self, d: DVec3) -> Option<[f32; 4]> {
         let (x, y) = self.locate(d)?;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (i, j) = (x0 as usize, y0 as usize);
+        // locate keeps positions inside the padded atlas, so they are non-negative.
+        let ((i, fx), (j, fy)) = (split(x.max(0.0)), split(y.max(0.0)));
+        let (i, j) = (i as usize, j as usize);
         let w = self.atlas.width;
         if i + 1 >= w || j + 1 >= self.atlas.height {
             return None;
         }
-        let frac = |f: f64| ((f * 65536.0).round() as u32).min(65535) as u16;
         let at = j * w + i;
         let a = &self.atlas.data;
-        Some(
-            T::bilinear(
-                a[at],
-                a[at + 1],
-                a[at + w],
-                a[at + w + 1],
-                frac(x - x0),
-                frac(y - y0),
-            )
-            .to_f32(),
-        )
+        Some(T::bilinear(a[at], a[at + 1], a[at + w], a[at + w + 1], fx, fy).to_f32())
     }
 
     /// How directions map into the atlas, for a GPU twin of [`Locate::locate`]: kind (0 cube,

@@ -60,7 +60,7 @@ impl Projective<'_> {
     }
 }
 
-/// A w × h raster of unit vectors (A = 1) where `f` gives one, zero elsewhere; rows in
+/// A w × h raster of the unit vectors `f` gives (A = 1), zero where it gives none; rows in
 /// parallel, `None` once `cancel` is set.
 pub fn map_pixels(
     w: usize,
@@ -78,7 +78,6 @@ pub fn map_pixels(
             }
             for (i, px) in row.iter_mut().enumerate() {
                 if let Some(v) = f(i, j) {
-                    let v = v.normalize();
                     *px = [v.x as f32, v.y as f32, v.z as f32, 1.0];
                 }
             }

@@ -58,7 +58,7 @@ type CpuCube = (
 );
 
 /// Face size and faces decided for a view (they change only with the view).
-type Plan = (Vec<u8>, Option<u32>, bool, (u32, [bool; 6]));
+type Plan = (Option<Vec<u8>>, Option<u32>, bool, (u32, [bool; 6]));
 
 pub struct SceneRenderer {
     backend: Backend,
@@ -216,12 +216,14 @@ impl SceneRenderer {
         // The sampling vectors decide the face size and the faces; for a view they are
         // computed once, not per frame (a warp map is decided on each call).
         let key = match source {
-            Source::View(view) => bytemuck::bytes_of(&ProjectionUniform::of(view, w, h)).to_vec(),
-            Source::Map(_) => Vec::new(),
+            Source::View(view) => {
+                Some(bytemuck::bytes_of(&ProjectionUniform::of(view, w, h)).to_vec())
+            }
+            Source::Map(_) => None,
         };
         let (face, faces) = match &self.plan {
             Some((k, f, c, decided))
-                if !key.is_empty() && *k == key && *f == o.face && *c == o.cmf =>
+                if key.is_some() && *k == key && *f == o.face && *c == o.cmf =>
             {
                 *decided
             }

@@ -4,7 +4,7 @@ use super::lattice::{self, Sampler};
 use super::{Filter, Warp, finish};
 use crate::content::{Atlas, Locate};
 use crate::error::{Error, Result};
-use crate::raster::{Pixel, Raster, Tap};
+use crate::raster::{Pixel, Raster, Tap, split};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::ops::Range;
@@ -23,23 +23,6 @@ pub struct Plan {
     atlas_width: usize,
     atlas_height: usize,
     taps: Vec<Tap>,
-}
-
-/// Splits a continuous atlas coordinate, known to lie in [0, 2³¹), into texel index and 16-bit
-/// fraction.
-///
-/// Truncation is floor here, and rounding is done by adding a half: `floor`, `round` and a
-/// general float-to-integer conversion were a third of the plan's time (the first two are
-/// library calls on baseline x86-64).
-#[inline]
-fn split(v: f64) -> (i64, u16) {
-    let base = v as u32;
-    let q = ((v - f64::from(base)) * 65536.0 + 0.5) as u32;
-    if q >= 65536 {
-        (i64::from(base) + 1, 0)
-    } else {
-        (i64::from(base), q as u16)
-    }
 }
 
 impl Plan {
@@ -374,17 +357,5 @@ fn sample<T: Pixel>(data: &[T], aw: usize, t: Tap, filter: Filter) -> [f32; 4] {
         )
         .to_f32(),
         Filter::Bicubic => crate::raster::cubic::bicubic_f32(data, aw, t),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn split_carries_a_fraction_that_rounds_up() {
-        assert_eq!(split(2.999_999_999), (3, 0));
-        assert_eq!(split(0.5), (0, 32768));
-        assert_eq!(split(7.25), (7, 16384));
     }
 }

@@ -21,9 +21,9 @@ pub struct PanoramaBenchArgs {
     /// The scene the panorama is projected onto.
     #[arg(long, default_value = "city:small")]
     scene: String,
-    /// Frames timed per case (the median is reported).
-    #[arg(long, default_value_t = 9)]
-    frames: usize,
+    /// Frames timed per case, 1–1000 (the median is reported).
+    #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    frames: u16,
     #[arg(long)]
     adapter: Option<String>,
 }
