@@ -20,6 +20,7 @@ use omniwarp::raster::{Pixel, Raster};
 use omniwarp::render::blur::Blur;
 use omniwarp::render::{self, Warp};
 use omniwarp::rig::{Channel, Rig};
+use omniwarp::scene::ppp::{Pieces, Tolerance};
 use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
 use std::path::{Path, PathBuf};
@@ -309,6 +310,26 @@ pub struct SceneArgs {
     /// Radial blur towards the image centre: the fraction of the way it reaches (0 to 1).
     #[arg(long)]
     pub blur: Option<f32>,
+    /// How a scene reaches the projection: cube (seed 000: a cube map, then the warp), ppp
+    /// (seed 003: straight into the output through piecewise perspective pieces) or exact (one
+    /// ray per pixel on the CPU: the reference the others are measured against; slow).
+    #[arg(long, value_enum, default_value = "cube")]
+    pub method: MethodArg,
+    /// ppp: the cut, cells across × down (e.g. 160x1); default: the fewest pieces that meet
+    /// --tolerance.
+    #[arg(long, value_parser = parse_size, conflicts_with = "tolerance")]
+    pub pieces: Option<(u32, u32)>,
+    /// ppp: the largest deviation from the true projection allowed when choosing the cut:
+    /// an angle (0.05deg, 0.001rad) or output pixels (0.25px, the default).
+    #[arg(long)]
+    pub tolerance: Option<String>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    Cube,
+    Ppp,
+    Exact,
 }
 
 fn render_scene(
@@ -342,7 +363,56 @@ fn render_scene(
         blur,
         eye: a.eye,
     };
-    let (img, report) = r.frame(view, &opts).map_err(flag_error)?;
+    let img = if a.method == MethodArg::Ppp {
+        let pieces = ppp_pieces(a, view, size)?;
+        let (img, report) = r.frame_ppp(&pieces, &opts).map_err(flag_error)?;
+        eprintln!(
+            "{}: piecewise perspective, {} pieces, replication {:.2}",
+            r.describe(),
+            report.pieces,
+            report.replication
+        );
+        img
+    } else {
+        if a.pieces.is_some() || a.tolerance.is_some() {
+            bail!("--pieces and --tolerance: choose the cut of --method ppp");
+        }
+        if a.method == MethodArg::Exact {
+            r.frame_exact(view, &opts).map_err(flag_error)?
+        } else {
+            cube_frame(&mut r, view, &opts)?
+        }
+    };
+    write_picture(&img, out)
+}
+
+/// The cut for `--method ppp`: `--pieces` as given, else the fewest pieces meeting
+/// `--tolerance`; either way the deviation it reaches is measured and said.
+fn ppp_pieces(a: &SceneArgs, view: &View, (w, h): (u32, u32)) -> Result<Pieces> {
+    let (pieces, deviation) = match a.pieces {
+        Some((c, r)) => {
+            let p = Pieces::new(view, w, h, c, r).map_err(flag_error)?;
+            let d = p.measure(view);
+            (p, d)
+        }
+        None => {
+            let t = Tolerance::parse(a.tolerance.as_deref().unwrap_or("0.25px"))
+                .map_err(flag_error)?;
+            Pieces::for_tolerance(view, w, h, t).map_err(flag_error)?
+        }
+    };
+    eprintln!(
+        "ppp: {}×{} cells, deviation from the true projection at most {:.4}° ({:.3} px)",
+        pieces.cols,
+        pieces.rows,
+        deviation.angle.to_degrees(),
+        deviation.pixels
+    );
+    Ok(pieces)
+}
+
+fn cube_frame(r: &mut SceneRenderer, view: &View, opts: &FrameOptions) -> Result<Raster<[u8; 4]>> {
+    let (img, report) = r.frame(view, opts).map_err(flag_error)?;
     let drawn: Vec<&str> = omniwarp::cubemap::Face::ALL
         .iter()
         .filter(|f| report.faces[f.index()])
@@ -354,6 +424,10 @@ fn render_scene(
         drawn.join(" "),
         report.face
     );
+    Ok(img)
+}
+
+fn write_picture(img: &Raster<[u8; 4]>, out: &Path) -> Result<()> {
     if out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"))

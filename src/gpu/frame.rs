@@ -3,6 +3,7 @@
 //! the benchmark share.
 
 use super::cube::CubePass;
+use super::ppp::{NEAR as PPP_NEAR, PppPass};
 use super::warp::{CubeTexture, ProjectionUniform, Source, WarpPass};
 use super::{Gpu, Renderer};
 use crate::content::Content;
@@ -10,10 +11,13 @@ use crate::cubemap::CubeMap;
 use crate::error::{Error, Result};
 use crate::normalmap::NormalMap;
 use crate::projection::View;
+use crate::projection::view::screen_of_pixel;
 use crate::raster::Raster;
 use crate::render::blur::{Blur, radial_blur};
 use crate::render::coverage::{face_size_for, faces_sampled};
 use crate::render::{self, Filter, Warp};
+use crate::scene::ppp::Pieces;
+use crate::scene::replicate::replicate;
 use crate::scene::{Projected, RayCaster, Scene};
 use glam::DVec3;
 
@@ -43,6 +47,8 @@ enum Backend {
         warp: Box<WarpPass>,
         cube: Box<CubePass>,
         target: Option<CubeTexture>,
+        /// Made on the first piecewise perspective frame.
+        ppp: Option<Box<PppPass>>,
     },
     Cpu {
         caster: Box<RayCaster>,
@@ -63,6 +69,19 @@ type Plan = (Option<Vec<u8>>, Option<u32>, bool, (u32, [bool; 6]));
 pub struct SceneRenderer {
     backend: Backend,
     plan: Option<Plan>,
+    /// The scene, for the piecewise perspective pass's replication.
+    scene: Scene,
+    projected: bool,
+    /// The exact per-pixel ray caster, made on the first exact frame.
+    exact: Option<Box<RayCaster>>,
+}
+
+/// What a piecewise perspective frame did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PppReport {
+    pub pieces: usize,
+    /// Triangles drawn (once per piece) over the scene's triangles.
+    pub replication: f64,
 }
 
 /// Largest face the CPU ray caster is asked for (6 × 2048² rays is already minutes).
@@ -96,6 +115,7 @@ impl SceneRenderer {
                     warp,
                     cube,
                     target: None,
+                    ppp: None,
                 }
             }
             None => Backend::Cpu {
@@ -107,6 +127,9 @@ impl SceneRenderer {
         Ok(SceneRenderer {
             backend,
             plan: None,
+            scene,
+            projected: false,
+            exact: None,
         })
     }
 
@@ -121,6 +144,7 @@ impl SceneRenderer {
     /// Shows `panorama` projected from its centre onto the scene (seed 001) instead of the
     /// scene's own colours, or the scene's colours again with `None`.
     pub fn set_panorama(&mut self, panorama: Option<Projected>) -> Result<()> {
+        self.projected = panorama.is_some();
         match &mut self.backend {
             Backend::Gpu { gpu, cube, .. } => cube.set_panorama(gpu, panorama.as_ref()),
             Backend::Cpu {
@@ -162,6 +186,76 @@ impl SceneRenderer {
             Backend::Gpu { cube, .. } => cube.faces_drawn,
             Backend::Cpu { .. } => 0,
         }
+    }
+
+    /// A frame drawn straight through a piecewise perspective projection (seed 003), the
+    /// pieces' replication decided for this eye; `o.face` and `o.cmf` do not apply.
+    pub fn frame_ppp(
+        &mut self,
+        pieces: &Pieces,
+        o: &FrameOptions,
+    ) -> Result<(Raster<[u8; 4]>, PppReport)> {
+        if self.projected {
+            return Err(Error::invalid(
+                "method",
+                "the piecewise perspective pass draws the scene's own colours; a projected panorama needs the cube method",
+            ));
+        }
+        if (pieces.width, pieces.height) != o.size {
+            return Err(Error::invalid(
+                "size",
+                format!(
+                    "the pieces are cut for {}×{}, the frame is {}×{}",
+                    pieces.width, pieces.height, o.size.0, o.size.1
+                ),
+            ));
+        }
+        let replication = replicate(&self.scene, pieces, o.eye, PPP_NEAR);
+        let mut img = match &mut self.backend {
+            Backend::Gpu { gpu, ppp, .. } => ppp
+                .get_or_insert_with(|| Box::new(PppPass::new(gpu, &self.scene)))
+                .render(gpu, pieces, &replication, o.eye)?,
+            Backend::Cpu { caster, .. } => {
+                caster.picture(o.eye, o.size.0, o.size.1, |i, j| pieces.ray(i, j))
+            }
+        };
+        if let Some(b) = o.blur {
+            img = radial_blur(&img, b);
+        }
+        Ok((
+            img,
+            PppReport {
+                pieces: pieces.pieces.len(),
+                replication: replication.factor,
+            },
+        ))
+    }
+
+    /// The exact reference: one ray per pixel centre along the view's own direction, cast on
+    /// the CPU whatever the backend; transparent where the view shows nothing.
+    pub fn frame_exact(&mut self, view: &View, o: &FrameOptions) -> Result<Raster<[u8; 4]>> {
+        if self.projected {
+            return Err(Error::invalid(
+                "method",
+                "the exact reference draws the scene's own colours; a projected panorama needs the cube method",
+            ));
+        }
+        let caster = match &self.backend {
+            Backend::Cpu { caster, .. } => caster,
+            Backend::Gpu { .. } => match &mut self.exact {
+                Some(c) => c,
+                slot => slot.insert(Box::new(self.scene.ray_caster()?)),
+            },
+        };
+        let (w, h) = o.size;
+        let mut img = caster.picture(o.eye, w, h, |i, j| {
+            let (s, t) = screen_of_pixel(f64::from(i) + 0.5, f64::from(j) + 0.5, w, h);
+            view.direction(s, t).ok()
+        });
+        if let Some(b) = o.blur {
+            img = radial_blur(&img, b);
+        }
+        Ok(img)
     }
 
     pub fn frame(
@@ -257,6 +351,7 @@ impl SceneRenderer {
                 warp,
                 cube,
                 target,
+                ..
             } => {
                 if target.as_ref().is_none_or(|t| t.size != face) {
                     *target = Some(CubeTexture::target(gpu, face));

@@ -5,7 +5,8 @@
 //! renderer, which stays the accuracy reference.
 //!
 //! One file per pass — [`cube`] (scenes into the cube map), [`warp`] (the cube map through the
-//! warp), [`blur`] (the radial blur) — with what full-screen passes share in `pass.rs` and the
+//! warp), [`ppp`] (scenes straight into a non-planar view, piece by piece), [`blur`] (the
+//! radial blur) — with what full-screen passes share in `pass.rs` and the
 //! driver of a whole frame in [`frame`]. Shaders live in `shaders/` (WGSL), each naming its CPU
 //! twin; `projections.wgsl` mirrors `src/projection/` formula for formula and is prepended to
 //! the passes that need it.
@@ -14,6 +15,7 @@ pub mod blur;
 pub mod cube;
 pub mod frame;
 mod pass;
+pub mod ppp;
 mod projected;
 pub mod warp;
 
@@ -23,6 +25,7 @@ pub const PROJECTIONS_WGSL: &str = include_str!("../../shaders/projections.wgsl"
 pub const WARP_WGSL: &str = include_str!("../../shaders/warp.wgsl");
 pub const SCENE_WGSL: &str = include_str!("../../shaders/scene.wgsl");
 pub const BLUR_WGSL: &str = include_str!("../../shaders/blur.wgsl");
+pub const PPP_WGSL: &str = include_str!("../../shaders/ppp.wgsl");
 
 /// The warp shader as compiled: the projections prepended.
 pub fn warp_source() -> String {

@@ -1,9 +1,13 @@
 //! 3D scenes: glTF and OBJ files, and a deterministic procedural city (a terrain, buildings on a
 //! street grid, four coloured towers at the compass points) in three sizes for tests and
-//! benchmarks. The GPU draws them in its cube-map pass (`gpu::cube`, `shaders/scene.wgsl`);
-//! [`raycast`] is that pass's CPU twin, for machines without any adapter.
+//! benchmarks. The GPU draws them in its cube-map pass (`gpu::cube`, `shaders/scene.wgsl`) or
+//! directly through a piecewise perspective projection ([`ppp`], [`replicate`]; `gpu::ppp`);
+//! [`raycast`] is both passes' CPU twin, for machines without any adapter, and the exact
+//! per-pixel reference.
 
+pub mod ppp;
 pub mod raycast;
+pub mod replicate;
 
 pub use raycast::RayCaster;
 

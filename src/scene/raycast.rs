@@ -6,7 +6,9 @@ use super::{Projected, SKY, sun};
 use crate::content::projective::Projective;
 use crate::cubemap::CubeMap;
 use crate::surface::Mesh;
+use crate::raster::Raster;
 use glam::DVec3;
+use rayon::prelude::*;
 
 pub struct RayCaster {
     pub(super) mesh: Mesh,
@@ -15,8 +17,6 @@ pub struct RayCaster {
 }
 
 impl RayCaster {
-    /// The scene seen from `eye` as a cube map (the CPU's cube-map pass): the colour of the
-    /// first triangle met, shaded as the GPU shades it, else the sky.
     /// The scene seen from `eye` with a panorama projected onto it (the CPU's twin of the GPU's
     /// `fs_projected` and `fs_sky`): a surface point P shows the panorama's direction P − C, a
     /// ray that meets nothing the panorama in its own direction; opaque black where the
@@ -42,16 +42,48 @@ impl RayCaster {
         })
     }
 
+    /// The scene seen from `eye` as a cube map (the CPU's cube-map pass): the colour of the
+    /// first triangle met, shaded as the GPU shades it, else the sky.
     pub fn cube(&self, eye: DVec3, face: usize, on: [bool; 6]) -> CubeMap<[u8; 4]> {
-        let sun = sun().as_dvec3();
-        CubeMap::from_fn_on(face, 1, on, |d| match self.mesh.first_hit(eye, d) {
+        CubeMap::from_fn_on(face, 1, on, |d| self.shade(eye, d))
+    }
+
+    /// What the eye sees along `d`: the first triangle met, shaded as `shaders/scene.wgsl`
+    /// and `shaders/ppp.wgsl` shade it, else the sky.
+    pub fn shade(&self, eye: DVec3, d: DVec3) -> [u8; 4] {
+        match self.mesh.first_hit(eye, d) {
             None => SKY,
             Some((_, k, n)) => {
                 let c = self.colors[k as usize];
-                let light = 0.45 + 0.55 * n.dot(sun).abs();
+                let light = 0.45 + 0.55 * n.dot(sun().as_dvec3()).abs();
                 let f = |v: u8| (f64::from(v) * light).round().clamp(0.0, 255.0) as u8;
                 [f(c[0]), f(c[1]), f(c[2]), 255]
             }
-        })
+        }
+    }
+
+    /// An image of the scene from `eye`, one ray per pixel centre along `ray(i, j)`;
+    /// transparent where there is no ray. Along a view's own directions this is the exact
+    /// reference every method is measured against; along [`super::ppp::Pieces::ray`] it is the
+    /// CPU twin of the GPU's piecewise perspective pass.
+    pub fn picture(
+        &self,
+        eye: DVec3,
+        width: u32,
+        height: u32,
+        ray: impl Fn(u32, u32) -> Option<DVec3> + Sync,
+    ) -> Raster<[u8; 4]> {
+        let data = (0..height)
+            .into_par_iter()
+            .flat_map_iter(|j| {
+                let ray = &ray;
+                (0..width).map(move |i| ray(i, j).map_or([0; 4], |d| self.shade(eye, d)))
+            })
+            .collect();
+        Raster {
+            width: width as usize,
+            height: height as usize,
+            data,
+        }
     }
 }
