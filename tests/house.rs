@@ -322,6 +322,10 @@ fn every_shader_and_its_cpu_twin_name_each_other() {
     let twins: &[(&str, &[&str])] = &[
         ("shaders/projections.wgsl", &["src/projection/mod.rs"]),
         ("shaders/scene.wgsl", &["src/scene/raycast.rs"]),
+        (
+            "shaders/ppp.wgsl",
+            &["src/scene/raycast.rs", "src/scene/ppp.rs"],
+        ),
         ("shaders/warp.wgsl", &["src/render/mod.rs"]),
         ("shaders/blur.wgsl", &["src/render/blur.rs"]),
     ];

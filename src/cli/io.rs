@@ -184,3 +184,15 @@ pub fn print_report(prefix: &str, r: &Report) -> Result<()> {
     );
     Ok(())
 }
+
+/// The median wall time of `frames` calls of `f`, milliseconds (benchmarks).
+pub fn median_ms(frames: u16, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut t = Vec::new();
+    for _ in 0..frames.max(1) {
+        let start = std::time::Instant::now();
+        f()?;
+        t.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    t.sort_by(f64::total_cmp);
+    Ok(t[t.len() / 2])
+}

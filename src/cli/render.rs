@@ -13,6 +13,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use glam::DVec3;
 use omniwarp::gpu::Renderer;
+use omniwarp::gpu::choose::{Method, choose};
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::View;
@@ -311,16 +312,18 @@ pub struct SceneArgs {
     #[arg(long)]
     pub blur: Option<f32>,
     /// How a scene reaches the projection: cube (seed 000: a cube map, then the warp), ppp
-    /// (seed 003: straight into the output through piecewise perspective pieces) or exact (one
-    /// ray per pixel on the CPU: the reference the others are measured against; slow).
+    /// (seed 003: straight into the output through piecewise perspective pieces), auto (the
+    /// cheaper of the two that meets --tolerance) or exact (one ray per pixel on the CPU: the
+    /// reference the others are measured against; slow).
     #[arg(long, value_enum, default_value = "cube")]
     pub method: MethodArg,
     /// ppp: the cut, cells across × down (e.g. 160x1); default: the fewest pieces that meet
     /// --tolerance.
     #[arg(long, value_parser = parse_size, conflicts_with = "tolerance")]
     pub pieces: Option<(u32, u32)>,
-    /// ppp: the largest deviation from the true projection allowed when choosing the cut:
-    /// an angle (0.05deg, 0.001rad) or output pixels (0.25px, the default).
+    /// ppp and auto: the largest deviation from the true projection allowed when choosing the
+    /// cut (and, for auto, the method): an angle (0.05deg, 0.001rad) or output pixels (median
+    /// pixel pitches; 0.25px, the default).
     #[arg(long)]
     pub tolerance: Option<String>,
 }
@@ -330,6 +333,8 @@ pub enum MethodArg {
     Cube,
     Ppp,
     Exact,
+    /// The cheaper of cube and ppp at the settings that meet --tolerance, timed on the scene.
+    Auto,
 }
 
 fn render_scene(
@@ -363,24 +368,47 @@ fn render_scene(
         blur,
         eye: a.eye,
     };
-    let img = if a.method == MethodArg::Ppp {
-        let pieces = ppp_pieces(a, view, size)?;
-        let (img, report) = r.frame_ppp(&pieces, &opts).map_err(flag_error)?;
-        eprintln!(
-            "{}: piecewise perspective, {} pieces, replication {:.2}",
-            r.describe(),
-            report.pieces,
-            report.replication
-        );
-        img
-    } else {
-        if a.pieces.is_some() || a.tolerance.is_some() {
-            bail!("--pieces and --tolerance: choose the cut of --method ppp");
-        }
-        if a.method == MethodArg::Exact {
-            r.frame_exact(view, &opts).map_err(flag_error)?
-        } else {
-            cube_frame(&mut r, view, &opts)?
+    if a.method != MethodArg::Ppp && a.method != MethodArg::Auto && a.tolerance.is_some() {
+        bail!("--tolerance: chooses the cut of --method ppp or the method of --method auto");
+    }
+    if a.method != MethodArg::Ppp && a.pieces.is_some() {
+        bail!("--pieces: the cut of --method ppp");
+    }
+    let img = match a.method {
+        MethodArg::Ppp => ppp_frame(&mut r, &ppp_pieces(a, view, size)?, &opts)?,
+        MethodArg::Exact => r.frame_exact(view, &opts).map_err(flag_error)?,
+        MethodArg::Cube => cube_frame(&mut r, view, &opts)?,
+        MethodArg::Auto => {
+            if a.face.is_some() {
+                bail!("--face: --method auto chooses the face size itself");
+            }
+            let t =
+                Tolerance::parse(a.tolerance.as_deref().unwrap_or("0.25px")).map_err(flag_error)?;
+            let max_face = if matches!(a.renderer, Some(RendererArg::Cpu)) {
+                2048
+            } else {
+                4096
+            };
+            let candidates = choose(&mut r, view, &opts, t, max_face).map_err(flag_error)?;
+            for c in &candidates {
+                eprintln!(
+                    "auto: {} — error at most {:.4}°, {:.0} ms a frame",
+                    c.describe(),
+                    c.angle.to_degrees(),
+                    c.ms
+                );
+            }
+            eprintln!("auto: chose {}", candidates[0].describe());
+            match &candidates[0].method {
+                Method::Cube { face } => {
+                    let o = FrameOptions {
+                        face: Some(*face),
+                        ..opts
+                    };
+                    cube_frame(&mut r, view, &o)?
+                }
+                Method::Ppp(pieces) => ppp_frame(&mut r, pieces, &opts)?,
+            }
         }
     };
     write_picture(&img, out)
@@ -396,8 +424,8 @@ fn ppp_pieces(a: &SceneArgs, view: &View, (w, h): (u32, u32)) -> Result<Pieces> 
             (p, d)
         }
         None => {
-            let t = Tolerance::parse(a.tolerance.as_deref().unwrap_or("0.25px"))
-                .map_err(flag_error)?;
+            let t =
+                Tolerance::parse(a.tolerance.as_deref().unwrap_or("0.25px")).map_err(flag_error)?;
             Pieces::for_tolerance(view, w, h, t).map_err(flag_error)?
         }
     };
@@ -409,6 +437,23 @@ fn ppp_pieces(a: &SceneArgs, view: &View, (w, h): (u32, u32)) -> Result<Pieces> 
         deviation.pixels
     );
     Ok(pieces)
+}
+
+fn ppp_frame(
+    r: &mut SceneRenderer,
+    pieces: &Pieces,
+    opts: &FrameOptions,
+) -> Result<Raster<[u8; 4]>> {
+    let (img, report) = r.frame_ppp(pieces, opts).map_err(flag_error)?;
+    let replication = report
+        .replication
+        .map_or(String::new(), |f| format!(", replication {f:.2}"));
+    eprintln!(
+        "{}: piecewise perspective, {} pieces{replication}",
+        r.describe(),
+        report.pieces
+    );
+    Ok(img)
 }
 
 fn cube_frame(r: &mut SceneRenderer, view: &View, opts: &FrameOptions) -> Result<Raster<[u8; 4]>> {
@@ -443,7 +488,7 @@ fn write_picture(img: &Raster<[u8; 4]>, out: &Path) -> Result<()> {
         };
         omniwarp::image_io::write_exr_rgba(out, &f, &[], omniwarp::image_io::Precision::Float)?;
     } else {
-        omniwarp::image_io::write_png(out, &img).context("--out")?;
+        omniwarp::image_io::write_png(out, img).context("--out")?;
     }
     Ok(())
 }

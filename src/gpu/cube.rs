@@ -6,7 +6,7 @@
 //! the output's finest angular pixel pitch unless given.
 
 use super::Gpu;
-use super::pass::scene_pipeline;
+use super::pass::{depth_view, scene_pipeline};
 use super::projected::PanoramaPass;
 use super::warp::CubeTexture;
 use crate::cubemap::Face;
@@ -164,21 +164,7 @@ impl CubePass {
             return false;
         }
         if self.depth.as_ref().is_none_or(|d| d.0 != target.size) {
-            let depth = gpu.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("depth"),
-                size: wgpu::Extent3d {
-                    width: target.size,
-                    height: target.size,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Depth32Float,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            });
-            self.depth = Some((target.size, depth.create_view(&Default::default())));
+            self.depth = Some((target.size, depth_view(gpu, target.size, target.size)));
         }
         let depth_view = &self.depth.as_ref().expect("set above").1;
         let srgb = |v: u8| f64::from(v) / 255.0;

@@ -5,7 +5,7 @@
 use super::cube::CubePass;
 use super::ppp::{NEAR as PPP_NEAR, PppPass};
 use super::warp::{CubeTexture, ProjectionUniform, Source, WarpPass};
-use super::{Gpu, Renderer};
+use super::{Gpu, Renderer, read_rgba8_layer};
 use crate::content::Content;
 use crate::cubemap::CubeMap;
 use crate::error::{Error, Result};
@@ -80,8 +80,9 @@ pub struct SceneRenderer {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PppReport {
     pub pieces: usize,
-    /// Triangles drawn (once per piece) over the scene's triangles.
-    pub replication: f64,
+    /// Triangles drawn (once per piece) over the scene's triangles; `None` on the CPU, whose
+    /// twin casts rays instead.
+    pub replication: Option<f64>,
 }
 
 /// Largest face the CPU ray caster is asked for (6 × 2048² rays is already minutes).
@@ -210,14 +211,19 @@ impl SceneRenderer {
                 ),
             ));
         }
-        let replication = replicate(&self.scene, pieces, o.eye, PPP_NEAR);
-        let mut img = match &mut self.backend {
-            Backend::Gpu { gpu, ppp, .. } => ppp
-                .get_or_insert_with(|| Box::new(PppPass::new(gpu, &self.scene)))
-                .render(gpu, pieces, &replication, o.eye)?,
-            Backend::Cpu { caster, .. } => {
-                caster.picture(o.eye, o.size.0, o.size.1, |i, j| pieces.ray(i, j))
+        // The CPU twin casts rays through the BVH and needs no replication.
+        let (mut img, replication) = match &mut self.backend {
+            Backend::Gpu { gpu, ppp, .. } => {
+                let replication = replicate(&self.scene, pieces, o.eye, PPP_NEAR);
+                let img = ppp
+                    .get_or_insert_with(|| Box::new(PppPass::new(gpu, &self.scene)))
+                    .render(gpu, pieces, &replication, o.eye)?;
+                (img, Some(replication.factor))
             }
+            Backend::Cpu { caster, .. } => (
+                caster.picture(o.eye, o.size.0, o.size.1, |i, j| pieces.ray(i, j)),
+                None,
+            ),
         };
         if let Some(b) = o.blur {
             img = radial_blur(&img, b);
@@ -226,9 +232,31 @@ impl SceneRenderer {
             img,
             PppReport {
                 pieces: pieces.pieces.len(),
-                replication: replication.factor,
+                replication,
             },
         ))
+    }
+
+    /// The scene from `eye` as a cube map of `face`² on the CPU: drawn by the cube-map pass and
+    /// read back on the GPU, ray cast on the CPU. For warping it on the CPU with any filter
+    /// and supersampling (the method chart).
+    pub fn cube_map(&mut self, eye: DVec3, face: u32) -> Result<CubeMap<[u8; 4]>> {
+        match &mut self.backend {
+            Backend::Gpu {
+                gpu, cube, target, ..
+            } => {
+                if target.as_ref().is_none_or(|t| t.size != face) {
+                    *target = Some(CubeTexture::target(gpu, face));
+                }
+                let t = target.as_ref().expect("set above");
+                cube.render(gpu, t, eye, [true; 6]);
+                let faces = crate::cubemap::Face::ALL
+                    .map(|f| read_rgba8_layer(gpu, &t.texture, face, face, f.index() as u32));
+                let [a, b, c, d, e, f] = faces;
+                CubeMap::from_faces([a?, b?, c?, d?, e?, f?])
+            }
+            Backend::Cpu { caster, .. } => Ok(caster.cube(eye, face as usize, [true; 6])),
+        }
     }
 
     /// The exact reference: one ray per pixel centre along the view's own direction, cast on

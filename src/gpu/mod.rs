@@ -12,6 +12,7 @@
 //! the passes that need it.
 
 pub mod blur;
+pub mod choose;
 pub mod cube;
 pub mod frame;
 mod pass;
@@ -147,6 +148,17 @@ pub fn read_rgba8(
     width: u32,
     height: u32,
 ) -> Result<crate::raster::Raster<[u8; 4]>> {
+    read_rgba8_layer(gpu, texture, width, height, 0)
+}
+
+/// [`read_rgba8`] of one array layer (a cube map's face).
+pub fn read_rgba8_layer(
+    gpu: &Gpu,
+    texture: &wgpu::Texture,
+    width: u32,
+    height: u32,
+    layer: u32,
+) -> Result<crate::raster::Raster<[u8; 4]>> {
     let row = padded_row(width, 4);
     let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
@@ -158,7 +170,16 @@ pub fn read_rgba8(
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
     enc.copy_texture_to_buffer(
-        texture.as_image_copy(),
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d {
+                x: 0,
+                y: 0,
+                z: layer,
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
         wgpu::TexelCopyBufferInfo {
             buffer: &buffer,
             layout: wgpu::TexelCopyBufferLayout {

@@ -175,3 +175,23 @@ pub(super) fn scene_pipeline(
     let depth = Some((true, wgpu::CompareFunction::Less));
     rgba8_pipeline(gpu, module, layouts, ["vs_main", fs], &buffers, depth)
 }
+
+/// A Depth32Float attachment of width × height.
+pub(super) fn depth_view(gpu: &Gpu, width: u32, height: u32) -> wgpu::TextureView {
+    gpu.device
+        .create_texture(&wgpu::TextureDescriptor {
+            label: Some("depth"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Depth32Float,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        })
+        .create_view(&Default::default())
+}

@@ -4,7 +4,7 @@
 //! `shaders/ppp.wgsl` keeps the half of a cut cell; the CPU twin ray-casts along the same
 //! pieces (`RayCaster::picture` with `Pieces::ray`).
 
-use super::pass::{output, rgba8_pipeline};
+use super::pass::{depth_view, output, scene_pipeline};
 use super::{Gpu, read_rgba8};
 use crate::error::Result;
 use crate::raster::Raster;
@@ -86,27 +86,7 @@ impl PppPass {
                     count: None,
                 }],
             });
-        let buffers = [
-            Some(wgpu::VertexBufferLayout {
-                array_stride: 12,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-            }),
-            Some(wgpu::VertexBufferLayout {
-                array_stride: 4,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![1 => Unorm8x4],
-            }),
-        ];
-        let depth = Some((true, wgpu::CompareFunction::Less));
-        let pipeline = rgba8_pipeline(
-            gpu,
-            &module,
-            &[&layout],
-            ["vs_main", "fs_main"],
-            &buffers,
-            depth,
-        );
+        let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main");
         let buffer = |bytes: &[u8]| {
             gpu.device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -184,23 +164,9 @@ impl PppPass {
                 usage: wgpu::BufferUsages::INDEX,
             });
         let target = output(gpu, w, h);
-        let depth = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("depth"),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Depth32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
         let (view, depth_view) = (
             target.create_view(&Default::default()),
-            depth.create_view(&Default::default()),
+            depth_view(gpu, w, h),
         );
         let c = |v: u8| f64::from(v) / 255.0;
         let mut enc = gpu

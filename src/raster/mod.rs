@@ -2,6 +2,7 @@
 //! works on: 8-bit ([u8; 4], values 0–255) and float ([f32; 4], nominally 0–1).
 
 pub(crate) mod cubic;
+pub mod edges;
 mod kernel;
 
 /// A seeded xorshift64 stream: the kernel tests' random texels and taps, the same every run.

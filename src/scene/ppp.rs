@@ -43,7 +43,9 @@ impl Tolerance {
         let bad = || {
             Error::invalid(
                 "tolerance",
-                format!("`{text}`: expected a positive angle or pixel count, as 0.05deg, 0.001rad or 0.5px"),
+                format!(
+                    "`{text}`: expected a positive angle or pixel count, as 0.05deg, 0.001rad or 0.5px"
+                ),
             )
         };
         let (number, unit) = text
@@ -104,7 +106,8 @@ impl Piece {
     /// GPU's fragment test (`shaders/ppp.wgsl`) is the same integer arithmetic.
     pub fn owns(&self, i: u32, j: u32) -> bool {
         let [x0, y0, x1, y1] = self.diagonal.map(i64::from);
-        let side = (2 * i64::from(i) + 1 - x0) * (y1 - y0) - (2 * i64::from(j) + 1 - y0) * (x1 - x0);
+        let side =
+            (2 * i64::from(i) + 1 - x0) * (y1 - y0) - (2 * i64::from(j) + 1 - y0) * (x1 - x0);
         match self.half {
             Half::Whole => true,
             Half::Upper => side > 0,
@@ -134,6 +137,8 @@ pub struct Pieces {
     cells: Vec<(u32, u8)>,
     /// Per cell: its corners' unit directions, for the replication test.
     pub(super) corners: Vec<[DVec3; 4]>,
+    /// The output's median pixel pitch, radians ([`median_pitch`]).
+    pub pitch: f64,
     /// Per pixel, whether the view has no direction there (outside a fisheye's circle);
     /// `None` when it has one everywhere. Such pixels are transparent, as in every renderer.
     hidden: Option<Vec<bool>>,
@@ -144,13 +149,14 @@ pub struct Pieces {
 pub struct Deviation {
     /// The largest angle between a piece's direction and the true one, radians.
     pub angle: f64,
-    /// The same angle over the local pixel pitch, at the pixel where it is largest.
+    /// The same angle in output pixels: over the output's median pixel pitch.
     pub pixels: f64,
 }
 
 impl Pieces {
     /// The view cut into `cols` × `rows` cells of (near) equal size.
     pub fn new(view: &View, width: u32, height: u32, cols: u32, rows: u32) -> Result<Pieces> {
+        crate::raster::check_size(width, height, 1)?;
         if cols == 0 || cols > width / 2 || rows == 0 || rows > height / 2 {
             return Err(Error::invalid(
                 "pieces",
@@ -213,20 +219,27 @@ impl Pieces {
                 ];
                 let first = pieces.len() as u32;
                 let shows = hidden.as_ref().is_none_or(|h| {
-                    (cell[1]..cell[3]).any(|y| {
-                        (cell[0]..cell[2]).any(|x| !h[(y * width + x) as usize])
-                    })
+                    (cell[1]..cell[3])
+                        .any(|y| (cell[0]..cell[2]).any(|x| !h[(y * width + x) as usize]))
                 });
-                let (Some(d), true) = (
-                    d.iter()
-                        .copied()
-                        .collect::<Option<Vec<DVec3>>>()
-                        .map(|v| [v[0], v[1], v[2], v[3]]),
-                    shows,
-                ) else {
+                if !shows {
                     cells.push((first, 0));
                     corners.push([DVec3::ZERO; 4]);
                     continue;
+                }
+                let Some(d) = d
+                    .iter()
+                    .copied()
+                    .collect::<Option<Vec<DVec3>>>()
+                    .map(|v| [v[0], v[1], v[2], v[3]])
+                else {
+                    return Err(Error::invalid(
+                        "pieces",
+                        format!(
+                            "the cell at pixels {}–{} × {}–{} shows part of the view but no direction reaches its corners; choose more pieces",
+                            cell[0], cell[2], cell[1], cell[3]
+                        ),
+                    ));
                 };
                 let diagonal = [p[0].0, p[0].1, p[2].0, p[2].1].map(|v| (2.0 * v).round() as i32);
                 let make = |tri: [usize; 3], half| -> Result<Piece> {
@@ -245,8 +258,8 @@ impl Pieces {
                         diagonal,
                     })
                 };
-                let flat = (d[0] + d[2] - d[1] - d[3]).length()
-                    <= 1e-9 * (d[0].length() + d[2].length());
+                let flat =
+                    (d[0] + d[2] - d[1] - d[3]).length() <= 1e-9 * (d[0].length() + d[2].length());
                 if flat {
                     pieces.push(make([0, 1, 2], Half::Whole)?);
                 } else {
@@ -277,6 +290,7 @@ impl Pieces {
             cells,
             corners,
             hidden,
+            pitch: median_pitch(view, width, height),
         })
     }
 
@@ -304,16 +318,20 @@ impl Pieces {
         let (cols, rows) = (counts(width / 2), counts(height / 2));
         let meets = |c: u32, r: u32| -> Option<Pieces> {
             let p = Pieces::new(view, width, height, c, r).ok()?;
-            let d = p.deviation(view, Sampling::Lattice(7), tolerance);
+            let d = p.deviation(view, Sampling::Lattice(7));
             tolerance.met(d.angle, d.pixels).then_some(p)
         };
         let mut best: Option<(Pieces, Deviation)> = None;
         let mut r = rows.len() - 1;
         for &c in &cols {
-            if best.as_ref().is_some_and(|(b, _)| c as usize >= b.pieces.len()) {
+            if best
+                .as_ref()
+                .is_some_and(|(b, _)| c as usize >= b.pieces.len())
+            {
                 break;
             }
-            while r > 0 && (c * rows[r]) as usize > MAX_PIECES {
+            // Two pieces a cell where cells are cut on their diagonal.
+            while r > 0 && 2 * (c * rows[r]) as usize > MAX_PIECES {
                 r -= 1;
             }
             let Some(mut found) = meets(c, rows[r]) else {
@@ -367,8 +385,10 @@ impl Pieces {
         if self.is_hidden(i, j) {
             return None;
         }
-        self.piece_at(i, j)
-            .map(|p| p.direction(f64::from(i) + 0.5, f64::from(j) + 0.5).normalize())
+        self.piece_at(i, j).map(|p| {
+            p.direction(f64::from(i) + 0.5, f64::from(j) + 0.5)
+                .normalize()
+        })
     }
 
     /// Whether pixel (i, j) shows nothing (the view has no direction there).
@@ -387,12 +407,10 @@ impl Pieces {
 
     /// The deviation from the true projection at every pixel centre the view shows.
     pub fn measure(&self, view: &View) -> Deviation {
-        self.deviation(view, Sampling::Every, Tolerance::Pixels(0.0))
+        self.deviation(view, Sampling::Every)
     }
 
-    /// The deviation at the sampled pixel centres; in pixels only when `goal` is in pixels.
-    fn deviation(&self, view: &View, sampling: Sampling, goal: Tolerance) -> Deviation {
-        let in_pixels = matches!(goal, Tolerance::Pixels(_));
+    fn deviation(&self, view: &View, sampling: Sampling) -> Deviation {
         let (w, h) = (self.width, self.height);
         let points: Vec<(u32, u32)> = match sampling {
             Sampling::Every => (0..h).flat_map(|j| (0..w).map(move |i| (i, j))).collect(),
@@ -406,40 +424,25 @@ impl Pieces {
                 })
                 .collect(),
         };
-        points
+        let angle = points
             .par_chunks(4096)
             .map(|chunk| {
-                let mut worst = Deviation {
-                    angle: 0.0,
-                    pixels: 0.0,
-                };
-                for &(i, j) in chunk {
-                    let (x, y) = (f64::from(i) + 0.5, f64::from(j) + 0.5);
-                    let (Some(truth), Some(ray)) = (true_direction(view, x, y, w, h), self.ray(i, j))
-                    else {
-                        continue;
-                    };
-                    let angle = angle_between(truth, ray);
-                    worst.angle = worst.angle.max(angle);
-                    if in_pixels {
-                        let pitch = pixel_pitch(view, x, y, w, h, truth);
-                        if pitch > 0.0 {
-                            worst.pixels = worst.pixels.max(angle / pitch);
-                        }
-                    }
-                }
-                worst
+                chunk
+                    .iter()
+                    .filter_map(|&(i, j)| {
+                        let (x, y) = (f64::from(i) + 0.5, f64::from(j) + 0.5);
+                        Some(angle_between(
+                            true_direction(view, x, y, w, h)?,
+                            self.ray(i, j)?,
+                        ))
+                    })
+                    .fold(0.0, f64::max)
             })
-            .reduce(
-                || Deviation {
-                    angle: 0.0,
-                    pixels: 0.0,
-                },
-                |a, b| Deviation {
-                    angle: a.angle.max(b.angle),
-                    pixels: a.pixels.max(b.pixels),
-                },
-            )
+            .reduce(|| 0.0, f64::max);
+        Deviation {
+            angle,
+            pixels: angle / self.pitch,
+        }
     }
 }
 
@@ -465,7 +468,8 @@ impl Scale {
         }
         match view.projection().name() {
             "cylindrical" => Scale::Cylinder(turn * DVec3::Y),
-            "perspective" => Scale::Plane(turn * DVec3::NEG_Z),
+            "cylindrical-vertical" => Scale::Cylinder(turn * DVec3::X),
+            "flat" => Scale::Plane(turn * DVec3::NEG_Z),
             _ => Scale::Unit,
         }
     }
@@ -497,15 +501,30 @@ fn angle_between(a: DVec3, b: DVec3) -> f64 {
     a.cross(b).length().atan2(a.dot(b))
 }
 
-/// The angle one output pixel spans at (x, y): the smaller of its horizontal and vertical
-/// neighbours' angles, so that an error in pixels is not understated where pixels stretch.
-fn pixel_pitch(view: &View, x: f64, y: f64, w: u32, h: u32, d: DVec3) -> f64 {
-    let step = |dx: f64, dy: f64| {
-        true_direction(view, x + dx, y + dy, w, h)
-            .or_else(|| true_direction(view, x - dx, y - dy, w, h))
-            .map_or(f64::INFINITY, |n| angle_between(d, n))
-    };
-    step(1.0, 0.0).min(step(0.0, 1.0)).min(std::f64::consts::PI)
+/// The output's typical pixel: the median angle between neighbouring pixel centres, over a
+/// lattice of about 64 × 64 pixels. A median, not the local pitch, so that pixels which span
+/// almost no angle (an equirect's rows at a pole) do not make every tolerance unreachable.
+pub fn median_pitch(view: &View, w: u32, h: u32) -> f64 {
+    let mut pitches: Vec<f64> = (0..64u32)
+        .flat_map(|b| (0..64u32).map(move |a| (a, b)))
+        .filter_map(|(a, b)| {
+            let (x, y) = (
+                (f64::from(a) + 0.5) * f64::from(w - 1) / 64.0 + 0.5,
+                (f64::from(b) + 0.5) * f64::from(h - 1) / 64.0 + 0.5,
+            );
+            let d = true_direction(view, x, y, w, h)?;
+            let right = true_direction(view, x + 1.0, y, w, h)?;
+            let down = true_direction(view, x, y + 1.0, w, h)?;
+            Some([angle_between(d, right), angle_between(d, down)])
+        })
+        .flatten()
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .collect();
+    if pitches.is_empty() {
+        return f64::NAN;
+    }
+    pitches.sort_by(f64::total_cmp);
+    pitches[pitches.len() / 2]
 }
 
 fn hidden_pixels(view: &View, w: u32, h: u32) -> Vec<bool> {

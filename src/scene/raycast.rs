@@ -5,8 +5,8 @@
 use super::{Projected, SKY, sun};
 use crate::content::projective::Projective;
 use crate::cubemap::CubeMap;
-use crate::surface::Mesh;
 use crate::raster::Raster;
+use crate::surface::Mesh;
 use glam::DVec3;
 use rayon::prelude::*;
 

@@ -1,5 +1,6 @@
 //! `omniwarp bench chart`: grid size against the largest reconstruction error of a tile screen
-//! (SVG) for cylindrical 270°×90°, fisheye 180° and fisheye 220°, with the figures printed.
+//! (SVG) for cylindrical 270°×90°, fisheye 180° and fisheye 220°, with the figures printed (with
+//! `--scene`, `bench chart` is the method chart of `methods.rs` instead).
 
 use super::super::io::print_report;
 use anyhow::{Result, bail};
@@ -12,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 #[derive(Args)]
 pub struct ChartArgs {
-    /// Output chart (.svg).
+    /// Output chart of the tile screens (.svg); without --scene.
     #[arg(long, default_value = "calibration/charts/tiles-grid-error.svg")]
     out: PathBuf,
 }

@@ -6,7 +6,9 @@ pub mod calibrate;
 pub mod chart;
 pub mod gpu;
 pub mod lens;
+pub mod methods;
 pub mod panorama;
+pub mod ppp;
 pub mod rig;
 pub mod serve;
 pub mod store;
@@ -35,6 +37,9 @@ pub enum BenchCommand {
     /// Seed 001's frame-rate table: a cubic and a cylindrical panorama projected onto a scene,
     /// viewer mode and from another centre, 640×480 and 1024×768, beside the seed's figures.
     Panorama(panorama::PanoramaBenchArgs),
+    /// Seed 003's Table 1: the 35k-triangle city at 1600×1200 through a 360° cylinder and a
+    /// view deformation, image-based against piecewise perspective, beside the seed's figures.
+    Ppp(ppp::PppBenchArgs),
     /// The daemon over loopback: tile edits per second and latency with many clients, and 1080p
     /// preview latency while they edit.
     Serve(serve::ServeBenchArgs),
@@ -47,8 +52,14 @@ pub enum BenchCommand {
     Lens,
     /// Tile screens: normal-map generation for grid and output sizes.
     Tiles,
-    /// Tile screens: chart of grid size against the largest reconstruction error (SVG).
-    Chart(chart::ChartArgs),
+    /// Tile screens: chart of grid size against the largest reconstruction error (SVG); with
+    /// --scene, every rendering method timed against its error (CSV and SVG, Pareto front).
+    Chart {
+        #[command(flatten)]
+        tiles: chart::ChartArgs,
+        #[command(flatten)]
+        methods: methods::MethodChartArgs,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -57,11 +68,15 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Rig { rig } => rig::run(&rig),
         BenchCommand::Gpu(a) => gpu::run(a),
         BenchCommand::Panorama(a) => panorama::run(a),
+        BenchCommand::Ppp(a) => ppp::run(a),
         BenchCommand::Serve(a) => serve::run(a),
         BenchCommand::Store(a) => store::run(a),
         BenchCommand::Calibrate => calibrate::run(),
         BenchCommand::Lens => lens::run(),
         BenchCommand::Tiles => tiles::run(),
-        BenchCommand::Chart(a) => chart::run(a),
+        BenchCommand::Chart { tiles, methods } => match methods.scene.clone() {
+            Some(spec) => methods::run(methods, &spec),
+            None => chart::run(tiles),
+        },
     }
 }

@@ -1,0 +1,501 @@
+//! `omniwarp bench chart --scene …`: every way omniwarp can draw one scene through one view,
+//! timed against how close each comes to the exact per-pixel ray cast — the speed-against-
+//! accuracy chart, with the Pareto front marked, as CSV and SVG.
+//!
+//! Methods: the cube map (seed 000) at face sizes 256–4096 with the analytic δP; the same cube
+//! through a float normal map (f32, f16) and through tile screens of several densities; the
+//! cube read back and warped on the CPU with nearest, bilinear and bicubic filters and 1–4×
+//! supersampling; piecewise perspective projection (seed 003) at several tolerances; and, on
+//! the CPU renderer, the ray-cast cube and PPP's CPU twin. Errors: PSNR against the exact image,
+//! the angular error of each pixel's sampling direction (where a method has one), and the edge
+//! widths relative to the exact image's over 8 × 8 regions (seed 003's Figure 8).
+
+use super::super::args::{ProjectionArgs, parse_size, parse_vec3};
+use super::super::io::median_ms;
+use anyhow::{Result, bail};
+use clap::Args;
+use glam::DVec3;
+use omniwarp::content::Content;
+use omniwarp::gpu::Renderer;
+use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
+use omniwarp::normalmap::NormalMap;
+use omniwarp::projection::View;
+use omniwarp::raster::edges::{relative_edge_widths, spread};
+use omniwarp::raster::{Raster, psnr};
+use omniwarp::render::{self, Filter, Warp};
+use omniwarp::scene::Scene;
+use omniwarp::scene::ppp::{Pieces, Tolerance, true_direction};
+use omniwarp::tiles::adapt::rows_for;
+use omniwarp::tiles::build::from_source;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args)]
+pub struct MethodChartArgs {
+    /// The scene every method draws (see `render --scene`).
+    #[arg(long)]
+    pub scene: Option<String>,
+    #[command(flatten)]
+    pub projection: ProjectionArgs,
+    /// Output size WxH.
+    #[arg(long, value_parser = parse_size, default_value = "1600x1200")]
+    pub size: (u32, u32),
+    /// Eye position x,y,z in the scene, metres.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,1.7,0", allow_hyphen_values = true)]
+    pub eye: DVec3,
+    /// Frames timed per method, 1–100 (the median is reported); every frame is redrawn.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u16).range(1..=100))]
+    pub frames: u16,
+    /// Also the CPU renderer's methods (the ray-cast cube, PPP's CPU twin).
+    #[arg(long)]
+    pub cpu: bool,
+    /// Where the chart goes: NAME.csv and NAME.svg.
+    #[arg(long, default_value = "calibration/charts/methods")]
+    pub name: PathBuf,
+    #[arg(long)]
+    pub adapter: Option<String>,
+}
+
+/// One method at one setting, measured.
+struct Row {
+    family: &'static str,
+    setting: String,
+    renderer: &'static str,
+    ms: f64,
+    db: f64,
+    /// Sampling-direction error, degrees: largest and 99th percentile (None: exact by
+    /// construction, the view's own formula).
+    direction: Option<(f64, f64)>,
+    /// Edge width relative to the exact image: median over regions, and p90/p10 spread.
+    edges: (f64, f64),
+    front: bool,
+}
+
+/// Largest and 99th-percentile angle, degrees, between `ray(i, j)` and the view's direction.
+fn direction_error(
+    view: &View,
+    (w, h): (u32, u32),
+    ray: impl Fn(u32, u32) -> Option<DVec3> + Sync,
+) -> (f64, f64) {
+    use rayon::prelude::*;
+    let mut angles: Vec<f64> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            let ray = &ray;
+            (0..w).filter_map(move |i| {
+                let (x, y) = (f64::from(i) + 0.5, f64::from(j) + 0.5);
+                let truth = true_direction(view, x, y, w, h)?;
+                let r = ray(i, j)?;
+                Some(truth.cross(r).length().atan2(truth.dot(r)).to_degrees())
+            })
+        })
+        .collect();
+    if angles.is_empty() {
+        return (0.0, 0.0);
+    }
+    angles.sort_by(f64::total_cmp);
+    (
+        angles[angles.len() - 1],
+        angles[(angles.len() - 1) * 99 / 100],
+    )
+}
+
+/// A normal map's values rounded to half precision, as an f16 EXR stores them.
+fn to_f16(map: &NormalMap) -> Result<NormalMap> {
+    let p = map.pixels();
+    let pixels = Raster {
+        width: p.width,
+        height: p.height,
+        data: p
+            .data
+            .iter()
+            .map(|v| v.map(|c| exr::prelude::f16::from_f32(c).to_f32()))
+            .collect(),
+    };
+    Ok(NormalMap::from_pixels(pixels, Vec::new())?)
+}
+
+/// Marks the rows no other row beats in both time and PSNR.
+fn mark_front(rows: &mut [Row]) {
+    let points: Vec<(f64, f64)> = rows.iter().map(|r| (r.ms, r.db)).collect();
+    for (k, r) in rows.iter_mut().enumerate() {
+        r.front = !points.iter().enumerate().any(|(o, &(ms, db))| {
+            o != k
+                && ms <= points[k].0
+                && db >= points[k].1
+                && (ms < points[k].0 || db > points[k].1)
+        });
+    }
+}
+
+pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
+    let (w, h) = a.size;
+    let view = a.projection.view(w, h)?;
+    let source = a.projection.source(w, h)?;
+    let scene = Scene::load(spec).map_err(|e| anyhow::anyhow!("--scene: {}", e.reason()))?;
+    let o = FrameOptions {
+        size: (w, h),
+        face: None,
+        cmf: true,
+        blur: None,
+        eye: a.eye,
+    };
+    let mut gpu = SceneRenderer::new(scene.clone(), Renderer::Gpu, a.adapter.as_deref())?;
+    let exact_start = Instant::now();
+    let exact = gpu.frame_exact(&view, &o)?;
+    let exact_ms = exact_start.elapsed().as_secs_f64() * 1e3;
+    let measure = |img: &Raster<[u8; 4]>| {
+        let widths = relative_edge_widths(img, &exact, 8);
+        let mut sorted = widths.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN);
+        (
+            psnr(img, &exact, 255.0, |_, _| true),
+            (median, spread(&widths)),
+        )
+    };
+    let mut rows = Vec::new();
+    let mut push = |family, setting: String, renderer, ms, img: &Raster<[u8; 4]>, direction| {
+        let (db, edges) = measure(img);
+        eprintln!("{family:<14} {setting:<28} {renderer:<4} {ms:9.1} ms {db:6.2} dB");
+        rows.push(Row {
+            family,
+            setting,
+            renderer,
+            ms,
+            db,
+            direction,
+            edges,
+            front: false,
+        });
+    };
+    let max_face = 4096;
+    for face in [256u32, 512, 1024, 2048, max_face] {
+        let of = FrameOptions {
+            face: Some(face),
+            ..o
+        };
+        let (img, _) = gpu.frame(&view, &of)?;
+        let ms = median_ms(a.frames, || {
+            gpu.invalidate();
+            gpu.frame(&view, &of).map(|_| ()).map_err(Into::into)
+        })?;
+        push(
+            "cube",
+            format!("{face}², analytic δP"),
+            "gpu",
+            ms,
+            &img,
+            None,
+        );
+    }
+    let face = 1024;
+    let of = FrameOptions {
+        face: Some(face),
+        ..o
+    };
+    let f32_map = NormalMap::from_view(&view, w, h)?;
+    let mut maps = vec![("normal map f32".to_string(), f32_map.clone())];
+    maps.push(("normal map f16".to_string(), to_f16(&f32_map)?));
+    for columns in [9usize, 17, 33, 65] {
+        let rows_n = rows_for(columns, w as usize, h as usize);
+        let screen = from_source(&source, columns, rows_n)?;
+        maps.push((
+            format!("tiles {columns}×{rows_n}"),
+            screen.feature_map(w as usize, h as usize).normal_map(),
+        ));
+    }
+    for (label, map) in &maps {
+        let (img, _) = gpu.frame_map(map, &of)?;
+        let ms = median_ms(a.frames, || {
+            gpu.invalidate();
+            gpu.frame_map(map, &of).map(|_| ()).map_err(Into::into)
+        })?;
+        let err = direction_error(&view, (w, h), |i, j| map.direction(i as usize, j as usize));
+        push(
+            "cube",
+            format!("{face}², {label}"),
+            "gpu",
+            ms,
+            &img,
+            Some(err),
+        );
+    }
+    let filters = [
+        (Filter::Nearest, 1),
+        (Filter::Bilinear, 1),
+        (Filter::Bicubic, 1),
+        (Filter::Bilinear, 2),
+        (Filter::Bicubic, 2),
+        (Filter::Bilinear, 4),
+    ];
+    for (filter, ss) in filters {
+        let frame = |gpu: &mut SceneRenderer| -> Result<Raster<[u8; 4]>> {
+            let cube = gpu.cube_map(a.eye, face)?;
+            Ok(render::render(
+                Warp::View(&view),
+                &Content::cube(&cube),
+                w,
+                h,
+                ss,
+                filter,
+            )?)
+        };
+        let img = frame(&mut gpu)?;
+        let ms = median_ms(a.frames, || {
+            gpu.invalidate();
+            frame(&mut gpu).map(|_| ())
+        })?;
+        let setting = format!("{face}² read back, CPU {filter:?} ×{ss}²").to_lowercase();
+        push("cube+cpu warp", setting, "gpu", ms, &img, None);
+    }
+    let mut cuts: Vec<(String, Pieces)> = Vec::new();
+    for t in ["1px", "0.5px", "0.25px", "0.1px"] {
+        let Ok((p, _)) = Pieces::for_tolerance(&view, w, h, Tolerance::parse(t)?) else {
+            eprintln!("ppp {t}: no cut meets it");
+            continue;
+        };
+        if !cuts
+            .iter()
+            .any(|(_, q)| (q.cols, q.rows) == (p.cols, p.rows))
+        {
+            cuts.push((format!("{t}: {}×{} cells", p.cols, p.rows), p));
+        }
+    }
+    let ppp_errors: Vec<(f64, f64)> = cuts
+        .iter()
+        .map(|(_, pieces)| direction_error(&view, (w, h), |i, j| pieces.ray(i, j)))
+        .collect();
+    for ((label, pieces), err) in cuts.iter().zip(&ppp_errors) {
+        let (img, _) = gpu.frame_ppp(pieces, &o)?;
+        let ms = median_ms(a.frames, || {
+            gpu.frame_ppp(pieces, &o).map(|_| ()).map_err(Into::into)
+        })?;
+        push("ppp", label.clone(), "gpu", ms, &img, Some(*err));
+    }
+    let adapter = gpu.describe();
+    drop(gpu);
+    if a.cpu {
+        let mut cpu = SceneRenderer::new(scene, Renderer::Cpu, None)?;
+        for face in [256u32, 512] {
+            let of = FrameOptions {
+                face: Some(face),
+                ..o
+            };
+            let (img, _) = cpu.frame(&view, &of)?;
+            let ms = median_ms(a.frames, || {
+                cpu.invalidate();
+                cpu.frame(&view, &of).map(|_| ()).map_err(Into::into)
+            })?;
+            push(
+                "cube",
+                format!("{face}², analytic δP"),
+                "cpu",
+                ms,
+                &img,
+                None,
+            );
+        }
+        for ((label, pieces), err) in cuts.iter().zip(&ppp_errors).take(2) {
+            let (img, _) = cpu.frame_ppp(pieces, &o)?;
+            let ms = median_ms(a.frames, || {
+                cpu.frame_ppp(pieces, &o).map(|_| ()).map_err(Into::into)
+            })?;
+            push("ppp", label.clone(), "cpu", ms, &img, Some(*err));
+        }
+    }
+    mark_front(&mut rows);
+    let title = format!(
+        "{spec}, {} {w}×{h}, {adapter}",
+        a.projection.projection.as_deref().unwrap_or("")
+    );
+    write_csv(&a.name, &rows, exact_ms)?;
+    write_svg(&a.name, &title, &rows)?;
+    outln!("{title}; exact reference (CPU ray cast) {exact_ms:.0} ms");
+    outln!(
+        "  method         | setting                          | on  | ms/frame | × fastest |   PSNR | dir. max° | dir. p99° | edge width | spread | front"
+    );
+    let fastest = rows.iter().map(|r| r.ms).fold(f64::INFINITY, f64::min);
+    for r in &rows {
+        let (dmax, dp99) = r.direction.map_or(("-".into(), "-".into()), |(m, p)| {
+            (format!("{m:.4}"), format!("{p:.4}"))
+        });
+        outln!(
+            "  {:<14} | {:<32} | {:<3} | {:8.1} | {:9.2} | {:6.2} | {dmax:>9} | {dp99:>9} | {:10.2} | {:6.2} | {}",
+            r.family,
+            r.setting,
+            r.renderer,
+            r.ms,
+            r.ms / fastest,
+            r.db,
+            r.edges.0,
+            r.edges.1,
+            if r.front { "*" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+/// Time (ratio to the fastest, log scale) against PSNR, one colour per method and renderer,
+/// the Pareto front joined.
+fn write_svg(name: &std::path::Path, title: &str, rows: &[Row]) -> Result<()> {
+    use plotters::prelude::*;
+    let path = name.with_extension("svg");
+    let fastest = rows.iter().map(|r| r.ms).fold(f64::INFINITY, f64::min);
+    let ratio = |r: &Row| r.ms / fastest;
+    let top = rows.iter().map(ratio).fold(1.0, f64::max) * 1.5;
+    let (lo, hi) = rows
+        .iter()
+        .map(|r| r.db)
+        .filter(|d| d.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+            (a.min(d), b.max(d))
+        });
+    let mut families: Vec<String> = Vec::new();
+    for r in rows {
+        let f = format!("{} ({})", r.family, r.renderer);
+        if !families.contains(&f) {
+            families.push(f);
+        }
+    }
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1000, 680)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("Speed against accuracy: {title}"),
+                ("sans-serif", 18),
+            )
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(56)
+            .build_cartesian_2d((0.8f64..top).log_scale(), (lo - 1.0)..(hi + 1.0))?;
+        chart
+            .configure_mesh()
+            .max_light_lines(1)
+            .x_label_formatter(&|v| format!("{v:.1}×"))
+            .x_desc("time per frame, over the fastest method's (log)")
+            .y_desc("PSNR against the exact ray cast, dB")
+            .draw()?;
+        let mut front: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.front)
+            .map(|r| (ratio(r), r.db))
+            .collect();
+        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart
+            .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
+        for (k, family) in families.iter().enumerate() {
+            let colour = Palette99::pick(k).to_rgba();
+            let mine: Vec<&Row> = rows
+                .iter()
+                .filter(|r| &format!("{} ({})", r.family, r.renderer) == family)
+                .collect();
+            chart
+                .draw_series(mine.iter().map(|r| {
+                    let size = if r.front { 6 } else { 4 };
+                    Circle::new((ratio(r), r.db), size, colour.filled())
+                }))?
+                .label(family.as_str())
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, colour.filled()));
+            chart.draw_series(mine.iter().map(|r| {
+                Text::new(
+                    r.setting.clone(),
+                    (ratio(r), r.db),
+                    ("sans-serif", 10).into_font().color(&BLACK),
+                )
+            }))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .border_style(BLACK)
+            .background_style(WHITE)
+            .draw()?;
+        root.present()?;
+    }
+    omniwarp::image_io::atomic_write(&path, |f| {
+        use std::io::Write;
+        f.write_all(svg.as_bytes())
+            .map_err(|e| omniwarp::Error::file(&path, e))
+    })?;
+    Ok(())
+}
+
+fn write_csv(name: &std::path::Path, rows: &[Row], exact_ms: f64) -> Result<()> {
+    let path = name.with_extension("csv");
+    let fastest = rows.iter().map(|r| r.ms).fold(f64::INFINITY, f64::min);
+    let mut text = String::from(
+        "method,setting,renderer,ms_per_frame,ratio_to_fastest,psnr_db,direction_max_deg,direction_p99_deg,edge_width_median,edge_width_spread,pareto\n",
+    );
+    for r in rows {
+        let (dmax, dp99) = r
+            .direction
+            .map_or((String::new(), String::new()), |(m, p)| {
+                (format!("{m:.6}"), format!("{p:.6}"))
+            });
+        text += &format!(
+            "{},\"{}\",{},{:.2},{:.3},{:.3},{dmax},{dp99},{:.4},{:.4},{}\n",
+            r.family,
+            r.setting,
+            r.renderer,
+            r.ms,
+            r.ms / fastest,
+            r.db,
+            r.edges.0,
+            r.edges.1,
+            r.front
+        );
+    }
+    text += &format!(
+        "exact,\"per-pixel ray cast (the reference)\",cpu,{exact_ms:.2},{:.3},inf,0,0,1,1,false\n",
+        exact_ms / fastest
+    );
+    if let Some(dir) = path.parent()
+        && !dir.as_os_str().is_empty()
+        && !dir.is_dir()
+    {
+        bail!("--name: {} is not a directory", dir.display());
+    }
+    omniwarp::image_io::atomic_write(&path, |f| {
+        use std::io::Write;
+        f.write_all(text.as_bytes())
+            .map_err(|e| omniwarp::Error::file(&path, e))
+    })?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(ms: f64, db: f64) -> Row {
+        Row {
+            family: "x",
+            setting: String::new(),
+            renderer: "gpu",
+            ms,
+            db,
+            direction: None,
+            edges: (1.0, 1.0),
+            front: false,
+        }
+    }
+
+    #[test]
+    fn the_front_keeps_only_rows_nothing_beats_in_both() {
+        let mut rows = vec![
+            row(10.0, 40.0),
+            row(20.0, 45.0),
+            row(30.0, 44.0),
+            row(5.0, 30.0),
+            row(10.0, 39.0),
+        ];
+        mark_front(&mut rows);
+        let front: Vec<bool> = rows.iter().map(|r| r.front).collect();
+        assert_eq!(front, [true, true, false, true, false]);
+    }
+}

@@ -1,0 +1,100 @@
+//! Model no more than a scene needs: given a tolerance, the cheapest way to draw this scene
+//! through this view that meets it. Each method's coarsest setting that meets the tolerance is
+//! found from geometry alone, then both are timed on the scene itself and the faster is kept.
+//!
+//! * The cube map (seed 000) is off by up to half a texel where its texels are largest, at a
+//!   face's centre: 1/N radians for faces of N², so N ≥ 1/tolerance (a multiple of 16; the
+//!   faces drawn are still only those the view samples).
+//! * Piecewise perspective projection (seed 003) is off by its pieces' measured deviation:
+//!   [`Pieces::for_tolerance`].
+
+use super::frame::{FrameOptions, SceneRenderer};
+use crate::error::{Error, Result};
+use crate::projection::View;
+use crate::scene::ppp::{Pieces, Tolerance, median_pitch};
+use std::time::Instant;
+
+/// A method at a setting.
+#[derive(Debug, Clone)]
+pub enum Method {
+    Cube { face: u32 },
+    Ppp(Pieces),
+}
+
+/// One candidate the chooser weighed.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    pub method: Method,
+    /// Its worst sampling error, radians.
+    pub angle: f64,
+    /// One frame of this scene, milliseconds.
+    pub ms: f64,
+}
+
+impl Candidate {
+    pub fn describe(&self) -> String {
+        match &self.method {
+            Method::Cube { face } => format!("cube map {face}²"),
+            Method::Ppp(p) => format!(
+                "ppp {}×{} cells ({} pieces)",
+                p.cols,
+                p.rows,
+                p.pieces.len()
+            ),
+        }
+    }
+}
+
+/// The candidates, fastest first; the first is the choice. `max_face` bounds the cube.
+pub fn choose(
+    r: &mut SceneRenderer,
+    view: &View,
+    o: &FrameOptions,
+    tolerance: Tolerance,
+    max_face: u32,
+) -> Result<Vec<Candidate>> {
+    let (w, h) = o.size;
+    let angle = match tolerance {
+        Tolerance::Angle(a) => a,
+        Tolerance::Pixels(p) => p * median_pitch(view, w, h),
+    };
+    let mut out = Vec::new();
+    let face = ((1.0 / angle / 16.0).ceil() * 16.0).max(64.0);
+    if face <= f64::from(max_face) {
+        let face = face as u32;
+        let of = FrameOptions {
+            face: Some(face),
+            ..*o
+        };
+        r.frame(view, &of)?;
+        r.invalidate();
+        let start = Instant::now();
+        r.frame(view, &of)?;
+        out.push(Candidate {
+            method: Method::Cube { face },
+            angle: 1.0 / f64::from(face),
+            ms: start.elapsed().as_secs_f64() * 1e3,
+        });
+    }
+    if let Ok((pieces, d)) = Pieces::for_tolerance(view, w, h, Tolerance::Angle(angle)) {
+        r.frame_ppp(&pieces, o)?;
+        let start = Instant::now();
+        r.frame_ppp(&pieces, o)?;
+        out.push(Candidate {
+            angle: d.angle,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+            method: Method::Ppp(pieces),
+        });
+    }
+    if out.is_empty() {
+        return Err(Error::invalid(
+            "tolerance",
+            format!(
+                "{}: neither a cube map up to {max_face}² nor a cut into pieces meets it",
+                tolerance.describe()
+            ),
+        ));
+    }
+    out.sort_by(|a, b| a.ms.total_cmp(&b.ms));
+    Ok(out)
+}
