@@ -6,6 +6,7 @@
 use glam::DVec3;
 use omniwarp::gpu::Renderer;
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
+use omniwarp::projection::view::screen_of_pixel;
 use omniwarp::projection::{self, Orientation, Params, View};
 use omniwarp::raster::edges::{relative_edge_widths, spread};
 use omniwarp::raster::psnr;
@@ -582,4 +583,45 @@ fn the_chooser_meets_the_tolerance_on_three_scenes() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("tolerance"), "{e}");
+}
+
+#[test]
+fn the_supersampled_reference_averages_only_across_edges() {
+    let (w, h) = (240, 160);
+    let v = cylinder(w, h, 90.0);
+    let mut r = SceneRenderer::new(closed_box(), Renderer::Cpu, None).unwrap();
+    let one = r.frame_exact(&v, &opts((w, h))).unwrap();
+    // One ray a pixel is the plain per-pixel cast at pixel centres.
+    let direct = closed_box()
+        .ray_caster()
+        .unwrap()
+        .picture(EYE, w, h, |i, j| {
+            let (s, t) = screen_of_pixel(f64::from(i) + 0.5, f64::from(j) + 0.5, w, h);
+            v.direction(s, t).ok()
+        });
+    assert!(
+        direct.data == one.data,
+        "one ray a pixel differs from the per-pixel cast"
+    );
+    let three = r.frame_reference(&v, &opts((w, h)), 3).unwrap();
+    let at = |x: usize, y: usize| one.data[y * w as usize + x];
+    let mut differ = 0;
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            if three.data[y * w as usize + x] == at(x, y) {
+                continue;
+            }
+            differ += 1;
+            // A wall's own pixels keep its colour; only pixels a face edge crosses mix.
+            let near_edge = [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
+                let (nx, ny) = (x as isize + dx, y as isize + dy);
+                (0..w as isize).contains(&nx)
+                    && (0..h as isize).contains(&ny)
+                    && at(nx as usize, ny as usize) != at(x, y)
+            });
+            assert!(near_edge, "({x}, {y}) changed away from any edge");
+        }
+    }
+    assert!(differ > 0, "no edge pixel was averaged");
+    assert!(r.frame_reference(&v, &opts((w, h)), 9).is_err());
 }

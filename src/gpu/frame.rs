@@ -262,10 +262,27 @@ impl SceneRenderer {
     /// The exact reference: one ray per pixel centre along the view's own direction, cast on
     /// the CPU whatever the backend; transparent where the view shows nothing.
     pub fn frame_exact(&mut self, view: &View, o: &FrameOptions) -> Result<Raster<[u8; 4]>> {
+        self.frame_reference(view, o, 1)
+    }
+
+    /// [`Self::frame_exact`] with `samples` × `samples` rays per pixel, averaged: the reference
+    /// for antialiased (supersampled) methods, which one ray per pixel centre penalises.
+    pub fn frame_reference(
+        &mut self,
+        view: &View,
+        o: &FrameOptions,
+        samples: u32,
+    ) -> Result<Raster<[u8; 4]>> {
         if self.projected {
             return Err(Error::invalid(
                 "method",
                 "the exact reference draws the scene's own colours; a projected panorama needs the cube method",
+            ));
+        }
+        if !(1..=8).contains(&samples) {
+            return Err(Error::invalid(
+                "samples",
+                format!("must be 1–8 per side, got {samples}"),
             ));
         }
         let caster = match &self.backend {
@@ -276,8 +293,8 @@ impl SceneRenderer {
             },
         };
         let (w, h) = o.size;
-        let mut img = caster.picture(o.eye, w, h, |i, j| {
-            let (s, t) = screen_of_pixel(f64::from(i) + 0.5, f64::from(j) + 0.5, w, h);
+        let mut img = caster.picture_averaged(o.eye, w, h, samples, |x, y| {
+            let (s, t) = screen_of_pixel(x, y, w, h);
             view.direction(s, t).ok()
         });
         if let Some(b) = o.blur {

@@ -49,6 +49,11 @@ pub struct MethodChartArgs {
     /// Also the CPU renderer's methods (the ray-cast cube, PPP's CPU twin).
     #[arg(long)]
     pub cpu: bool,
+    /// Rays per pixel side of the exact reference, 1–4: 1 is the point-sampled image every
+    /// one-sample method approximates; 4 (16 rays, averaged) the antialiased image that
+    /// supersampled methods approximate.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4))]
+    pub reference_samples: u32,
     /// Where the chart goes: NAME.csv and NAME.svg.
     #[arg(long, default_value = "calibration/charts/methods")]
     pub name: PathBuf,
@@ -142,7 +147,7 @@ pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
     };
     let mut gpu = SceneRenderer::new(scene.clone(), Renderer::Gpu, a.adapter.as_deref())?;
     let exact_start = Instant::now();
-    let exact = gpu.frame_exact(&view, &o)?;
+    let exact = gpu.frame_reference(&view, &o, a.reference_samples)?;
     let exact_ms = exact_start.elapsed().as_secs_f64() * 1e3;
     let measure = |img: &Raster<[u8; 4]>| {
         let widths = relative_edge_widths(img, &exact, 8);
@@ -305,8 +310,9 @@ pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
         }
     }
     mark_front(&mut rows);
+    let k = a.reference_samples;
     let title = format!(
-        "{spec}, {} {w}×{h}, {adapter}",
+        "{spec}, {} {w}×{h}, {adapter}, reference {k}×{k} rays a pixel",
         a.projection.projection.as_deref().unwrap_or("")
     );
     write_csv(&a.name, &rows, exact_ms)?;
