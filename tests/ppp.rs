@@ -625,3 +625,34 @@ fn the_supersampled_reference_averages_only_across_edges() {
     assert!(differ > 0, "no edge pixel was averaged");
     assert!(r.frame_reference(&v, &opts((w, h)), 9).is_err());
 }
+
+#[test]
+fn multisampled_ppp_matches_its_twin_and_the_antialiased_reference() {
+    let (w, h) = (480, 360);
+    let v = cylinder(w, h, 90.0);
+    let scene = Scene::city(10_000);
+    let mut gpu = gpu_renderer(scene.clone());
+    let mut cpu = SceneRenderer::new(scene, Renderer::Cpu, None).unwrap();
+    let (pieces, _) = Pieces::for_tolerance(&v, w, h, Tolerance::Pixels(0.25)).unwrap();
+    let o = opts((w, h));
+    let reference = gpu.frame_reference(&v, &o, 4).unwrap();
+    let (plain, _) = gpu.frame_ppp(&pieces, &o).unwrap();
+    let (msaa, _) = gpu.frame_ppp_antialiased(&pieces, &o).unwrap();
+    let (twin, _) = cpu.frame_ppp_antialiased(&pieces, &o).unwrap();
+    let all = |_: usize, _: usize| true;
+    let (plain_db, msaa_db) = (
+        psnr(&plain, &reference, 255.0, all),
+        psnr(&msaa, &reference, 255.0, all),
+    );
+    let twin_db = psnr(&msaa, &twin, 255.0, all);
+    eprintln!(
+        "against 4×4 rays: plain {plain_db:.2} dB, 4× MSAA {msaa_db:.2} dB; GPU vs CPU twin {twin_db:.2} dB"
+    );
+    // Measured on lavapipe: plain 37.8 dB, 4× MSAA 50.7 dB, twins 64.8 dB (the CPU casts at
+    // Vulkan's standard sample positions).
+    assert!(
+        msaa_db >= plain_db + 6.0,
+        "plain {plain_db:.2}, msaa {msaa_db:.2}"
+    );
+    assert!(twin_db >= 55.0, "{twin_db:.2} dB");
+}

@@ -326,6 +326,9 @@ pub struct SceneArgs {
     /// pixel pitches; 0.25px, the default).
     #[arg(long)]
     pub tolerance: Option<String>,
+    /// ppp: antialias with 4× multisampling (the CPU twin casts at the same 4 positions).
+    #[arg(long)]
+    pub msaa: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -374,8 +377,11 @@ fn render_scene(
     if a.method != MethodArg::Ppp && a.pieces.is_some() {
         bail!("--pieces: the cut of --method ppp");
     }
+    if a.msaa && !matches!(a.method, MethodArg::Ppp | MethodArg::Auto) {
+        bail!("--msaa: antialiases --method ppp (the cube method filters its cube map instead)");
+    }
     let img = match a.method {
-        MethodArg::Ppp => ppp_frame(&mut r, &ppp_pieces(a, view, size)?, &opts)?,
+        MethodArg::Ppp => ppp_frame(&mut r, &ppp_pieces(a, view, size)?, &opts, a.msaa)?,
         MethodArg::Exact => r.frame_exact(view, &opts).map_err(flag_error)?,
         MethodArg::Cube => cube_frame(&mut r, view, &opts)?,
         MethodArg::Auto => {
@@ -407,7 +413,7 @@ fn render_scene(
                     };
                     cube_frame(&mut r, view, &o)?
                 }
-                Method::Ppp(pieces) => ppp_frame(&mut r, pieces, &opts)?,
+                Method::Ppp(pieces) => ppp_frame(&mut r, pieces, &opts, a.msaa)?,
             }
         }
     };
@@ -443,8 +449,14 @@ fn ppp_frame(
     r: &mut SceneRenderer,
     pieces: &Pieces,
     opts: &FrameOptions,
+    msaa: bool,
 ) -> Result<Raster<[u8; 4]>> {
-    let (img, report) = r.frame_ppp(pieces, opts).map_err(flag_error)?;
+    let (img, report) = if msaa {
+        r.frame_ppp_antialiased(pieces, opts)
+    } else {
+        r.frame_ppp(pieces, opts)
+    }
+    .map_err(flag_error)?;
     let replication = report
         .replication
         .map_or(String::new(), |f| format!(", replication {f:.2}"));

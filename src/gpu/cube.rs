@@ -92,7 +92,7 @@ impl CubePass {
                     count: None,
                 }],
             });
-        let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main");
+        let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main", 1);
         let buffer = |bytes: &[u8], usage| {
             gpu.device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -164,7 +164,7 @@ impl CubePass {
             return false;
         }
         if self.depth.as_ref().is_none_or(|d| d.0 != target.size) {
-            self.depth = Some((target.size, depth_view(gpu, target.size, target.size)));
+            self.depth = Some((target.size, depth_view(gpu, target.size, target.size, 1)));
         }
         let depth_view = &self.depth.as_ref().expect("set above").1;
         let srgb = |v: u8| f64::from(v) / 255.0;

@@ -85,6 +85,15 @@ pub struct PppReport {
     pub replication: Option<f64>,
 }
 
+/// Vulkan's standard positions of 4× multisampling within a pixel (what lavapipe and GPUs use
+/// with `sample_count` 4): the CPU twin of the antialiased piecewise perspective pass.
+const MSAA_POSITIONS: [(f64, f64); 4] = [
+    (0.375, 0.125),
+    (0.875, 0.375),
+    (0.125, 0.625),
+    (0.625, 0.875),
+];
+
 /// Largest face the CPU ray caster is asked for (6 × 2048² rays is already minutes).
 const CPU_MAX_FACE: u32 = 2048;
 
@@ -196,6 +205,25 @@ impl SceneRenderer {
         pieces: &Pieces,
         o: &FrameOptions,
     ) -> Result<(Raster<[u8; 4]>, PppReport)> {
+        self.ppp(pieces, o, false)
+    }
+
+    /// [`Self::frame_ppp`] antialiased: 4× multisampling on the GPU; on the CPU, rays at the
+    /// same four standard sample positions, averaged.
+    pub fn frame_ppp_antialiased(
+        &mut self,
+        pieces: &Pieces,
+        o: &FrameOptions,
+    ) -> Result<(Raster<[u8; 4]>, PppReport)> {
+        self.ppp(pieces, o, true)
+    }
+
+    fn ppp(
+        &mut self,
+        pieces: &Pieces,
+        o: &FrameOptions,
+        msaa: bool,
+    ) -> Result<(Raster<[u8; 4]>, PppReport)> {
         if self.projected {
             return Err(Error::invalid(
                 "method",
@@ -217,13 +245,19 @@ impl SceneRenderer {
                 let replication = replicate(&self.scene, pieces, o.eye, PPP_NEAR);
                 let img = ppp
                     .get_or_insert_with(|| Box::new(PppPass::new(gpu, &self.scene)))
-                    .render(gpu, pieces, &replication, o.eye)?;
+                    .render(gpu, pieces, &replication, o.eye, msaa)?;
                 (img, Some(replication.factor))
             }
-            Backend::Cpu { caster, .. } => (
-                caster.picture(o.eye, o.size.0, o.size.1, |i, j| pieces.ray(i, j)),
-                None,
-            ),
+            Backend::Cpu { caster, .. } => {
+                let (w, h) = o.size;
+                let img = if msaa {
+                    caster
+                        .picture_averaged(o.eye, w, h, &MSAA_POSITIONS, |x, y| pieces.ray_at(x, y))
+                } else {
+                    caster.picture(o.eye, w, h, |i, j| pieces.ray(i, j))
+                };
+                (img, None)
+            }
         };
         if let Some(b) = o.blur {
             img = radial_blur(&img, b);
@@ -293,7 +327,14 @@ impl SceneRenderer {
             },
         };
         let (w, h) = o.size;
-        let mut img = caster.picture_averaged(o.eye, w, h, samples, |x, y| {
+        let k = f64::from(samples);
+        let grid: Vec<(f64, f64)> = (0..samples * samples)
+            .map(|n| {
+                let (a, b) = (f64::from(n % samples), f64::from(n / samples));
+                ((a + 0.5) / k, (b + 0.5) / k)
+            })
+            .collect();
+        let mut img = caster.picture_averaged(o.eye, w, h, &grid, |x, y| {
             let (s, t) = screen_of_pixel(x, y, w, h);
             view.direction(s, t).ok()
         });

@@ -40,12 +40,20 @@ pub(super) fn fullscreen(
             label: None,
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
-    rgba8_pipeline(gpu, &module, &[layout], ["vs_main", "fs_main"], &[], None)
+    rgba8_pipeline(
+        gpu,
+        &module,
+        &[layout],
+        ["vs_main", "fs_main"],
+        &[],
+        None,
+        1,
+    )
 }
 
-/// A pipeline of `module`'s `entries` (vertex, fragment) writing RGBA8, both sides of every
-/// triangle drawn (the cube faces' matrices mirror), with a Depth32Float test when `depth`
-/// says whether to write and how to compare.
+/// A pipeline of `module`'s `entries` (vertex, fragment) writing RGBA8 with `samples` samples
+/// a pixel, both sides of every triangle drawn (the cube faces' matrices mirror), with a
+/// Depth32Float test when `depth` says whether to write and how to compare.
 pub(super) fn rgba8_pipeline(
     gpu: &Gpu,
     module: &wgpu::ShaderModule,
@@ -53,6 +61,7 @@ pub(super) fn rgba8_pipeline(
     entries: [&str; 2],
     buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
     depth: Option<(bool, wgpu::CompareFunction)>,
+    samples: u32,
 ) -> wgpu::RenderPipeline {
     let layouts: Vec<_> = layouts.iter().map(|l| Some(*l)).collect();
     let pl = gpu
@@ -83,7 +92,10 @@ pub(super) fn rgba8_pipeline(
                 stencil: Default::default(),
                 bias: Default::default(),
             }),
-            multisample: Default::default(),
+            multisample: wgpu::MultisampleState {
+                count: samples,
+                ..Default::default()
+            },
             fragment: Some(wgpu::FragmentState {
                 module,
                 entry_point: Some(entries[1]),
@@ -152,13 +164,14 @@ pub(super) fn draw(
     gpu.queue.submit([enc.finish()]);
 }
 
-/// A pipeline drawing the scene's triangles (positions, colours) into a cube face with depth,
-/// fragment shader `fs` of the scene module.
+/// A pipeline drawing the scene's triangles (positions, colours) with depth, fragment shader
+/// `fs` of `module`, `samples` samples a pixel.
 pub(super) fn scene_pipeline(
     gpu: &Gpu,
     module: &wgpu::ShaderModule,
     layouts: &[&wgpu::BindGroupLayout],
     fs: &str,
+    samples: u32,
 ) -> wgpu::RenderPipeline {
     let buffers = [
         Some(wgpu::VertexBufferLayout {
@@ -173,11 +186,19 @@ pub(super) fn scene_pipeline(
         }),
     ];
     let depth = Some((true, wgpu::CompareFunction::Less));
-    rgba8_pipeline(gpu, module, layouts, ["vs_main", fs], &buffers, depth)
+    rgba8_pipeline(
+        gpu,
+        module,
+        layouts,
+        ["vs_main", fs],
+        &buffers,
+        depth,
+        samples,
+    )
 }
 
-/// A Depth32Float attachment of width × height.
-pub(super) fn depth_view(gpu: &Gpu, width: u32, height: u32) -> wgpu::TextureView {
+/// A Depth32Float attachment of width × height, `samples` samples a pixel.
+pub(super) fn depth_view(gpu: &Gpu, width: u32, height: u32, samples: u32) -> wgpu::TextureView {
     gpu.device
         .create_texture(&wgpu::TextureDescriptor {
             label: Some("depth"),
@@ -187,7 +208,7 @@ pub(super) fn depth_view(gpu: &Gpu, width: u32, height: u32) -> wgpu::TextureVie
                 depth_or_array_layers: 1,
             },
             mip_level_count: 1,
-            sample_count: 1,
+            sample_count: samples,
             dimension: wgpu::TextureDimension::D2,
             format: wgpu::TextureFormat::Depth32Float,
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT,

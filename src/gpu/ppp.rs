@@ -54,8 +54,13 @@ fn piece_matrix(piece: &Piece, eye: DVec3, width: u32, height: u32) -> DMat4 {
     ndc * camera
 }
 
+/// Samples a pixel when the pass antialiases (`render`'s `msaa`).
+pub const MSAA: u32 = 4;
+
 pub struct PppPass {
     pipeline: wgpu::RenderPipeline,
+    /// The same with [`MSAA`] samples a pixel.
+    multisampled: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     positions: wgpu::Buffer,
     colors: wgpu::Buffer,
@@ -86,7 +91,8 @@ impl PppPass {
                     count: None,
                 }],
             });
-        let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main");
+        let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main", 1);
+        let multisampled = scene_pipeline(gpu, &module, &[&layout], "fs_main", MSAA);
         let buffer = |bytes: &[u8]| {
             gpu.device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -97,6 +103,7 @@ impl PppPass {
         };
         PppPass {
             pipeline,
+            multisampled,
             layout,
             positions: buffer(bytemuck::cast_slice(&scene.positions)),
             colors: buffer(bytemuck::cast_slice(&scene.colors)),
@@ -105,14 +112,18 @@ impl PppPass {
     }
 
     /// The scene from `eye` through `pieces`, each cell drawing the triangles `replication`
-    /// gave it; transparent where the view shows nothing.
+    /// gave it; transparent where the view shows nothing. With `msaa`, [`MSAA`] samples a pixel
+    /// resolved to one (triangle edges antialiased; a cut cell's halves still split whole
+    /// pixels, which is invisible: both halves draw the same scene continuously).
     pub fn render(
         &mut self,
         gpu: &Gpu,
         pieces: &Pieces,
         replication: &Replication,
         eye: DVec3,
+        msaa: bool,
     ) -> Result<Raster<[u8; 4]>> {
+        let samples = if msaa { MSAA } else { 1 };
         let (w, h) = (pieces.width, pieces.height);
         let uniforms: Vec<PieceUniform> = pieces
             .pieces
@@ -166,8 +177,26 @@ impl PppPass {
         let target = output(gpu, w, h);
         let (view, depth_view) = (
             target.create_view(&Default::default()),
-            depth_view(gpu, w, h),
+            depth_view(gpu, w, h, samples),
         );
+        let many = msaa.then(|| {
+            gpu.device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some("multisampled"),
+                    size: wgpu::Extent3d {
+                        width: w,
+                        height: h,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: MSAA,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba8Unorm,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default())
+        });
         let c = |v: u8| f64::from(v) / 255.0;
         let mut enc = gpu
             .device
@@ -176,9 +205,9 @@ impl PppPass {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("ppp"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
+                    view: many.as_ref().unwrap_or(&view),
                     depth_slice: None,
-                    resolve_target: None,
+                    resolve_target: many.as_ref().map(|_| &view),
                     ops: wgpu::Operations {
                         load: wgpu::LoadOp::Clear(wgpu::Color {
                             r: c(SKY[0]),
@@ -201,7 +230,11 @@ impl PppPass {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.pipeline);
+            pass.set_pipeline(if msaa {
+                &self.multisampled
+            } else {
+                &self.pipeline
+            });
             pass.set_vertex_buffer(0, self.positions.slice(..));
             pass.set_vertex_buffer(1, self.colors.slice(..));
             pass.set_index_buffer(index.slice(..), wgpu::IndexFormat::Uint32);

@@ -129,7 +129,7 @@ impl PanoramaPass {
             ],
         });
         Ok(PanoramaPass {
-            pipeline: scene_pipeline(gpu, module, &[face, &layout], "fs_projected"),
+            pipeline: scene_pipeline(gpu, module, &[face, &layout], "fs_projected", 1),
             sky: sky_pipeline(gpu, module, &[face, &layout]),
             bind,
             buffer,
@@ -158,5 +158,5 @@ fn sky_pipeline(
     layouts: &[&wgpu::BindGroupLayout],
 ) -> wgpu::RenderPipeline {
     let depth = Some((false, wgpu::CompareFunction::Always));
-    rgba8_pipeline(gpu, module, layouts, ["vs_sky", "fs_sky"], &[], depth)
+    rgba8_pipeline(gpu, module, layouts, ["vs_sky", "fs_sky"], &[], depth, 1)
 }

@@ -391,6 +391,16 @@ impl Pieces {
         })
     }
 
+    /// The direction the pieces show at continuous position (x, y): the piece that owns the
+    /// pixel there, evaluated at (x, y) (a multisample's position).
+    pub fn ray_at(&self, x: f64, y: f64) -> Option<DVec3> {
+        let (i, j) = (x.floor() as u32, y.floor() as u32);
+        if x < 0.0 || y < 0.0 || i >= self.width || j >= self.height || self.is_hidden(i, j) {
+            return None;
+        }
+        self.piece_at(i, j).map(|p| p.direction(x, y).normalize())
+    }
+
     /// Whether pixel (i, j) shows nothing (the view has no direction there).
     pub fn is_hidden(&self, i: u32, j: u32) -> bool {
         self.hidden

@@ -87,18 +87,18 @@ impl RayCaster {
         }
     }
 
-    /// An image of the scene from `eye` with `k` × `k` rays per pixel along `ray(x, y)` (x, y
-    /// continuous pixel positions, sub-pixel centres), averaged over the rays that exist;
-    /// transparent where none does. With k = 1 it is [`Self::picture`] at the pixel centres.
+    /// An image of the scene from `eye` with one ray per sample position (offsets within the
+    /// pixel, 0–1) along `ray(x, y)` (x, y continuous pixel positions), averaged over the rays
+    /// that exist; transparent where none does. With the single offset (½, ½) it is
+    /// [`Self::picture`].
     pub fn picture_averaged(
         &self,
         eye: DVec3,
         width: u32,
         height: u32,
-        k: u32,
+        offsets: &[(f64, f64)],
         ray: impl Fn(f64, f64) -> Option<DVec3> + Sync,
     ) -> Raster<[u8; 4]> {
-        let at = move |i: u32, a: u32| f64::from(i) + (f64::from(a) + 0.5) / f64::from(k);
         let data = (0..height)
             .into_par_iter()
             .flat_map_iter(|j| {
@@ -106,15 +106,13 @@ impl RayCaster {
                 (0..width).map(move |i| {
                     let mut sum = [0u32; 4];
                     let mut n = 0;
-                    for b in 0..k {
-                        for a in 0..k {
-                            if let Some(d) = ray(at(i, a), at(j, b)) {
-                                let c = self.shade(eye, d);
-                                for (s, v) in sum.iter_mut().zip(c) {
-                                    *s += u32::from(v);
-                                }
-                                n += 1;
+                    for &(dx, dy) in offsets {
+                        if let Some(d) = ray(f64::from(i) + dx, f64::from(j) + dy) {
+                            let c = self.shade(eye, d);
+                            for (s, v) in sum.iter_mut().zip(c) {
+                                *s += u32::from(v);
                             }
+                            n += 1;
                         }
                     }
                     if n == 0 {

@@ -5,7 +5,8 @@
 //! Methods: the cube map (seed 000) at face sizes 256–4096 with the analytic δP; the same cube
 //! through a float normal map (f32, f16) and through tile screens of several densities; the
 //! cube read back and warped on the CPU with nearest, bilinear and bicubic filters and 1–4×
-//! supersampling; piecewise perspective projection (seed 003) at several tolerances; and, on
+//! supersampling; piecewise perspective projection (seed 003) at several tolerances, and at
+//! 0.25 px with 4× multisampling; and, on
 //! the CPU renderer, the ray-cast cube and PPP's CPU twin. Errors: PSNR against the exact image,
 //! the angular error of each pixel's sampling direction (where a method has one), and the edge
 //! widths relative to the exact image's over 8 × 8 regions (seed 003's Figure 8).
@@ -277,6 +278,25 @@ pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
             gpu.frame_ppp(pieces, &o).map(|_| ()).map_err(Into::into)
         })?;
         push("ppp", label.clone(), "gpu", ms, &img, Some(*err));
+    }
+    if let (Some((label, pieces)), Some(err)) = (
+        cuts.get(2).or(cuts.last()),
+        ppp_errors.get(2).or(ppp_errors.last()),
+    ) {
+        let (img, _) = gpu.frame_ppp_antialiased(pieces, &o)?;
+        let ms = median_ms(a.frames, || {
+            gpu.frame_ppp_antialiased(pieces, &o)
+                .map(|_| ())
+                .map_err(Into::into)
+        })?;
+        push(
+            "ppp",
+            format!("{label}, 4× MSAA"),
+            "gpu",
+            ms,
+            &img,
+            Some(*err),
+        );
     }
     let adapter = gpu.describe();
     drop(gpu);
