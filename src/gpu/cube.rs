@@ -6,7 +6,7 @@
 //! the output's finest angular pixel pitch unless given.
 
 use super::Gpu;
-use super::pass::{depth_view, scene_pipeline};
+use super::pass::{buffer, depth_view, scene_pipeline, uniform_layout};
 use super::projected::PanoramaPass;
 use super::warp::CubeTexture;
 use crate::cubemap::Face;
@@ -77,30 +77,9 @@ impl CubePass {
                 label: Some("scene"),
                 source: wgpu::ShaderSource::Wgsl(super::SCENE_WGSL.into()),
             });
-        let layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("face"),
-                entries: &[wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                }],
-            });
+        let layout = uniform_layout(gpu, "face", None);
         let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main", 1);
-        let buffer = |bytes: &[u8], usage| {
-            gpu.device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: None,
-                    contents: bytes,
-                    usage,
-                })
-        };
+        let buffer = |bytes: &[u8], usage| buffer(gpu, bytes, usage);
         CubePass {
             module,
             pipeline,

@@ -313,6 +313,7 @@ impl SceneRenderer {
                 "the exact reference draws the scene's own colours; a projected panorama needs the cube method",
             ));
         }
+        crate::raster::check_size(o.size.0, o.size.1, samples)?;
         if !(1..=8).contains(&samples) {
             return Err(Error::invalid(
                 "samples",

@@ -216,3 +216,37 @@ pub(super) fn depth_view(gpu: &Gpu, width: u32, height: u32, samples: u32) -> wg
         })
         .create_view(&Default::default())
 }
+
+/// The layout of one uniform buffer at binding 0 seen by both stages; with `dynamic`, bound at
+/// offsets of that many bytes (one slot per draw).
+pub(super) fn uniform_layout(
+    gpu: &Gpu,
+    label: &str,
+    dynamic: Option<u64>,
+) -> wgpu::BindGroupLayout {
+    gpu.device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: dynamic.is_some(),
+                    min_binding_size: dynamic.and_then(wgpu::BufferSize::new),
+                },
+                count: None,
+            }],
+        })
+}
+
+/// A buffer holding `bytes` for `usage` (a scene's vertices or indices).
+pub(super) fn buffer(gpu: &Gpu, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    gpu.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytes,
+            usage,
+        })
+}

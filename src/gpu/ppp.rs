@@ -4,7 +4,7 @@
 //! `shaders/ppp.wgsl` keeps the half of a cut cell; the CPU twin ray-casts along the same
 //! pieces (`RayCaster::picture` with `Pieces::ray`).
 
-use super::pass::{depth_view, output, scene_pipeline};
+use super::pass::{buffer, depth_view, output, scene_pipeline, uniform_layout};
 use super::{Gpu, read_rgba8};
 use crate::error::Result;
 use crate::raster::Raster;
@@ -76,37 +76,16 @@ impl PppPass {
                 label: Some("ppp"),
                 source: wgpu::ShaderSource::Wgsl(super::PPP_WGSL.into()),
             });
-        let layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("piece"),
-                entries: &[wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: true,
-                        min_binding_size: wgpu::BufferSize::new(STRIDE),
-                    },
-                    count: None,
-                }],
-            });
+        let layout = uniform_layout(gpu, "piece", Some(STRIDE));
         let pipeline = scene_pipeline(gpu, &module, &[&layout], "fs_main", 1);
         let multisampled = scene_pipeline(gpu, &module, &[&layout], "fs_main", MSAA);
-        let buffer = |bytes: &[u8]| {
-            gpu.device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: None,
-                    contents: bytes,
-                    usage: wgpu::BufferUsages::VERTEX,
-                })
-        };
+        let vertices = |bytes: &[u8]| buffer(gpu, bytes, wgpu::BufferUsages::VERTEX);
         PppPass {
             pipeline,
             multisampled,
             layout,
-            positions: buffer(bytemuck::cast_slice(&scene.positions)),
-            colors: buffer(bytemuck::cast_slice(&scene.colors)),
+            positions: vertices(bytemuck::cast_slice(&scene.positions)),
+            colors: vertices(bytemuck::cast_slice(&scene.colors)),
             pieces_drawn: 0,
         }
     }
@@ -167,13 +146,11 @@ impl PppPass {
         // One index more than needed keeps the buffer non-empty when nothing is drawn.
         let mut indices = replication.indices.clone();
         indices.push(0);
-        let index = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("replicated"),
-                contents: bytemuck::cast_slice(&indices),
-                usage: wgpu::BufferUsages::INDEX,
-            });
+        let index = buffer(
+            gpu,
+            bytemuck::cast_slice(&indices),
+            wgpu::BufferUsages::INDEX,
+        );
         let target = output(gpu, w, h);
         let (view, depth_view) = (
             target.create_view(&Default::default()),

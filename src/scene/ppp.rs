@@ -141,7 +141,7 @@ pub struct Pieces {
     pub pitch: f64,
     /// Per pixel, whether the view has no direction there (outside a fisheye's circle);
     /// `None` when it has one everywhere. Such pixels are transparent, as in every renderer.
-    hidden: Option<Vec<bool>>,
+    hidden: Option<std::sync::Arc<Vec<bool>>>,
 }
 
 /// What [`Pieces::measure`] found.
@@ -157,6 +157,13 @@ impl Pieces {
     /// The view cut into `cols` × `rows` cells of (near) equal size.
     pub fn new(view: &View, width: u32, height: u32, cols: u32, rows: u32) -> Result<Pieces> {
         crate::raster::check_size(width, height, 1)?;
+        Pieces::cut(view, &Facts::new(view, width, height), cols, rows)
+    }
+
+    /// [`Pieces::new`] with what does not depend on the cut already known (the chooser tries
+    /// many cuts of one view).
+    fn cut(view: &View, facts: &Facts, cols: u32, rows: u32) -> Result<Pieces> {
+        let (width, height) = (facts.width, facts.height);
         if cols == 0 || cols > width / 2 || rows == 0 || rows > height / 2 {
             return Err(Error::invalid(
                 "pieces",
@@ -195,9 +202,7 @@ impl Pieces {
                 )
             })
             .unzip();
-        let hidden = strict
-            .contains(&false)
-            .then(|| hidden_pixels(view, width, height));
+        let hidden = strict.contains(&false).then(|| facts.hidden(view));
         fill_missing(&mut grid, nx, ny);
         let mut pieces = Vec::new();
         let mut cells = Vec::with_capacity(cols as usize * rows as usize);
@@ -290,7 +295,7 @@ impl Pieces {
             cells,
             corners,
             hidden,
-            pitch: median_pitch(view, width, height),
+            pitch: facts.pitch,
         })
     }
 
@@ -315,9 +320,11 @@ impl Pieces {
             v.sort_unstable();
             v
         };
+        crate::raster::check_size(width, height, 1)?;
         let (cols, rows) = (counts(width / 2), counts(height / 2));
+        let facts = Facts::new(view, width, height);
         let meets = |c: u32, r: u32| -> Option<Pieces> {
-            let p = Pieces::new(view, width, height, c, r).ok()?;
+            let p = Pieces::cut(view, &facts, c, r).ok()?;
             let d = p.deviation(view, Sampling::Lattice(7));
             tolerance.met(d.angle, d.pixels).then_some(p)
         };
@@ -453,6 +460,32 @@ impl Pieces {
             angle,
             pixels: angle / self.pitch,
         }
+    }
+}
+
+/// What every cut of one view at one size shares: its median pixel pitch, and (computed on
+/// first need) which pixels it shows nothing at.
+struct Facts {
+    width: u32,
+    height: u32,
+    pitch: f64,
+    hidden: std::sync::OnceLock<std::sync::Arc<Vec<bool>>>,
+}
+
+impl Facts {
+    fn new(view: &View, width: u32, height: u32) -> Facts {
+        Facts {
+            width,
+            height,
+            pitch: median_pitch(view, width, height),
+            hidden: std::sync::OnceLock::new(),
+        }
+    }
+
+    fn hidden(&self, view: &View) -> std::sync::Arc<Vec<bool>> {
+        self.hidden
+            .get_or_init(|| std::sync::Arc::new(hidden_pixels(view, self.width, self.height)))
+            .clone()
     }
 }
 
