@@ -6,6 +6,7 @@
 use glam::DVec3;
 use omniwarp::gpu::Renderer;
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
+use omniwarp::gpu::warp::Source;
 use omniwarp::projection::view::screen_of_pixel;
 use omniwarp::projection::{self, Orientation, Params, View};
 use omniwarp::raster::edges::{relative_edge_widths, spread};
@@ -543,7 +544,7 @@ fn the_chooser_meets_the_tolerance_on_three_scenes() {
                     Tolerance::Angle(a) => a,
                     Tolerance::Pixels(p) => p * omniwarp::scene::ppp::median_pitch(v, w, h),
                 };
-                let picks = choose(&mut r, v, &opts((w, h)), t, 4096).unwrap();
+                let picks = choose(&mut r, Source::View(v), &opts((w, h)), t, 4096).unwrap();
                 assert!(!picks.is_empty());
                 for c in &picks {
                     assert!(
@@ -575,7 +576,7 @@ fn the_chooser_meets_the_tolerance_on_three_scenes() {
     let mut r = gpu_renderer(closed_box());
     let e = choose(
         &mut r,
-        &views[0],
+        Source::View(&views[0]),
         &opts((w, h)),
         Tolerance::Angle(1e-7),
         4096,

@@ -15,6 +15,7 @@ use glam::DVec3;
 use omniwarp::gpu::Renderer;
 use omniwarp::gpu::choose::{Method, choose};
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
+use omniwarp::gpu::warp::Source;
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::View;
 use omniwarp::raster::{Pixel, Raster};
@@ -395,7 +396,8 @@ fn render_scene(
             } else {
                 4096
             };
-            let candidates = choose(&mut r, view, &opts, t, max_face).map_err(flag_error)?;
+            let candidates =
+                choose(&mut r, Source::View(view), &opts, t, max_face).map_err(flag_error)?;
             for c in &candidates {
                 eprintln!(
                     "auto: {} — error at most {:.4}°, {:.0} ms a frame",

@@ -9,9 +9,9 @@
 //!   [`Pieces::for_tolerance`].
 
 use super::frame::{FrameOptions, SceneRenderer};
+use super::warp::Source;
 use crate::error::{Error, Result};
-use crate::projection::View;
-use crate::scene::ppp::{Pieces, Tolerance, median_pitch};
+use crate::scene::ppp::{Directions, Pieces, Tolerance, ViewAt, median_pitch_on};
 use std::time::Instant;
 
 /// A method at a setting.
@@ -45,18 +45,33 @@ impl Candidate {
     }
 }
 
-/// The candidates, fastest first; the first is the choice. `max_face` bounds the cube.
+/// The candidates, fastest first; the first is the choice. `source` is a view or a projector
+/// channel's warp map; `max_face` bounds the cube.
 pub fn choose(
     r: &mut SceneRenderer,
-    view: &View,
+    source: Source<'_>,
     o: &FrameOptions,
     tolerance: Tolerance,
     max_face: u32,
 ) -> Result<Vec<Candidate>> {
     let (w, h) = o.size;
+    let view_at;
+    let dirs: &dyn Directions = match source {
+        Source::View(view) => {
+            view_at = ViewAt::new(view, w, h)?;
+            &view_at
+        }
+        Source::Map(map) => map,
+    };
+    if dirs.size() != (w, h) {
+        return Err(Error::invalid(
+            "size",
+            format!("the warp map is {:?}, the frame {w}×{h}", dirs.size()),
+        ));
+    }
     let angle = match tolerance {
         Tolerance::Angle(a) => a,
-        Tolerance::Pixels(p) => p * median_pitch(view, w, h),
+        Tolerance::Pixels(p) => p * median_pitch_on(dirs),
     };
     let mut out = Vec::new();
     let face = ((1.0 / angle / 16.0).ceil() * 16.0).max(64.0);
@@ -66,17 +81,17 @@ pub fn choose(
             face: Some(face),
             ..*o
         };
-        r.frame(view, &of)?;
+        r.frame_from(source, &of)?;
         r.invalidate();
         let start = Instant::now();
-        r.frame(view, &of)?;
+        r.frame_from(source, &of)?;
         out.push(Candidate {
             method: Method::Cube { face },
             angle: 1.0 / f64::from(face),
             ms: start.elapsed().as_secs_f64() * 1e3,
         });
     }
-    if let Ok((pieces, d)) = Pieces::for_tolerance(view, w, h, Tolerance::Angle(angle)) {
+    if let Ok((pieces, d)) = Pieces::for_tolerance_on(dirs, Tolerance::Angle(angle)) {
         r.frame_ppp(&pieces, o)?;
         let start = Instant::now();
         r.frame_ppp(&pieces, o)?;

@@ -143,6 +143,11 @@ impl SceneRenderer {
         })
     }
 
+    /// Whether frames are drawn on a GPU adapter (lavapipe counts) rather than the CPU twin.
+    pub fn on_gpu(&self) -> bool {
+        matches!(self.backend, Backend::Gpu { .. })
+    }
+
     /// The adapter's description, or "CPU".
     pub fn describe(&self) -> String {
         match &self.backend {
@@ -320,13 +325,7 @@ impl SceneRenderer {
                 format!("must be 1–8 per side, got {samples}"),
             ));
         }
-        let caster = match &self.backend {
-            Backend::Cpu { caster, .. } => caster,
-            Backend::Gpu { .. } => match &mut self.exact {
-                Some(c) => c,
-                slot => slot.insert(Box::new(self.scene.ray_caster()?)),
-            },
-        };
+        let caster = self.exact_caster()?;
         let (w, h) = o.size;
         let k = f64::from(samples);
         let grid: Vec<(f64, f64)> = (0..samples * samples)
@@ -343,6 +342,49 @@ impl SceneRenderer {
             img = radial_blur(&img, b);
         }
         Ok(img)
+    }
+
+    /// The exact reference through a projector channel's warp map: one ray per pixel along
+    /// the map's own direction, transparent where the map has none.
+    pub fn frame_exact_map(
+        &mut self,
+        map: &NormalMap,
+        o: &FrameOptions,
+    ) -> Result<Raster<[u8; 4]>> {
+        if self.projected {
+            return Err(Error::invalid(
+                "method",
+                "the exact reference draws the scene's own colours; a projected panorama needs the cube method",
+            ));
+        }
+        let (w, h) = o.size;
+        if (map.width(), map.height()) != (w as usize, h as usize) {
+            return Err(Error::invalid(
+                "size",
+                format!(
+                    "the warp map is {}×{}, the frame {w}×{h}",
+                    map.width(),
+                    map.height()
+                ),
+            ));
+        }
+        let caster = self.exact_caster()?;
+        let mut img = caster.picture(o.eye, w, h, |i, j| map.direction(i as usize, j as usize));
+        if let Some(b) = o.blur {
+            img = radial_blur(&img, b);
+        }
+        Ok(img)
+    }
+
+    /// The CPU ray caster: the backend's own on the CPU, else one built on first need.
+    fn exact_caster(&mut self) -> Result<&RayCaster> {
+        Ok(match &self.backend {
+            Backend::Cpu { caster, .. } => caster,
+            Backend::Gpu { .. } => match &mut self.exact {
+                Some(c) => c,
+                slot => slot.insert(Box::new(self.scene.ray_caster()?)),
+            },
+        })
     }
 
     pub fn frame(
@@ -376,7 +418,8 @@ impl SceneRenderer {
         self.frame_from(Source::Map(map), o)
     }
 
-    fn frame_from(
+    /// [`Self::frame`] or [`Self::frame_map`], as `source` says.
+    pub fn frame_from(
         &mut self,
         source: Source<'_>,
         o: &FrameOptions,

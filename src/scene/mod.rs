@@ -5,6 +5,7 @@
 //! [`raycast`] is both passes' CPU twin, for machines without any adapter, and the exact
 //! per-pixel reference.
 
+pub mod directions;
 pub mod ppp;
 pub mod raycast;
 pub mod replicate;

@@ -19,9 +19,12 @@
 //! few points per cell. `replicate.rs` decides which triangles each cell must draw; the GPU
 //! pass is `src/gpu/ppp.rs`, its CPU twin [`super::RayCaster::picture`] along [`Pieces::ray`].
 
+use super::directions::angle_between;
+pub use super::directions::{
+    Directions, Scale, ViewAt, median_pitch, median_pitch_on, true_direction,
+};
 use crate::error::{Error, Result};
 use crate::projection::View;
-use crate::projection::view::screen_of_pixel;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
@@ -156,14 +159,20 @@ pub struct Deviation {
 impl Pieces {
     /// The view cut into `cols` × `rows` cells of (near) equal size.
     pub fn new(view: &View, width: u32, height: u32, cols: u32, rows: u32) -> Result<Pieces> {
+        Pieces::new_on(&ViewAt::new(view, width, height)?, cols, rows)
+    }
+
+    /// [`Pieces::new`] of any directions: a view at a size, or a projector's warp map.
+    pub fn new_on(dirs: &dyn Directions, cols: u32, rows: u32) -> Result<Pieces> {
+        let (width, height) = dirs.size();
         crate::raster::check_size(width, height, 1)?;
-        Pieces::cut(view, &Facts::new(view, width, height), cols, rows)
+        Pieces::cut(dirs, &Facts::new(dirs), cols, rows)
     }
 
     /// [`Pieces::new`] with what does not depend on the cut already known (the chooser tries
     /// many cuts of one view).
-    fn cut(view: &View, facts: &Facts, cols: u32, rows: u32) -> Result<Pieces> {
-        let (width, height) = (facts.width, facts.height);
+    fn cut(dirs: &dyn Directions, facts: &Facts, cols: u32, rows: u32) -> Result<Pieces> {
+        let (width, height) = dirs.size();
         if cols == 0 || cols > width / 2 || rows == 0 || rows > height / 2 {
             return Err(Error::invalid(
                 "pieces",
@@ -189,20 +198,29 @@ impl Pieces {
                 k => f64::from(edges[k]),
             }
         };
-        let scale = Scale::of(view);
+        let scale = dirs.scale();
         let (nx, ny) = (cols as usize + 1, rows as usize + 1);
+        // A corner outside the domain may bound a cell that shows pixels up to a cell's
+        // diagonal away.
+        let reach = 2 * (width.div_ceil(cols)).max(height.div_ceil(rows));
         let (mut grid, strict): (Vec<Option<DVec3>>, Vec<bool>) = (0..nx * ny)
             .into_par_iter()
             .map(|k| {
                 let (x, y) = (at(&xs, k % nx), at(&ys, k / nx));
-                let (s, t) = screen_of_pixel(x, y, width, height);
-                (
-                    true_direction(view, x, y, width, height).map(|d| scale.apply(d)),
-                    view.direction(s, t).is_ok(),
-                )
+                let (d, own) = dirs.at(x, y);
+                let d = if own {
+                    d
+                } else {
+                    dirs.continued(x, y, reach).or(d)
+                };
+                (d.map(|d| scale.apply(d)), own)
             })
             .unzip();
-        let hidden = strict.contains(&false).then(|| facts.hidden(view));
+        // Only where a corner falls outside the output's domain can a pixel show nothing.
+        let hidden = strict
+            .contains(&false)
+            .then(|| facts.hidden(dirs))
+            .flatten();
         fill_missing(&mut grid, nx, ny);
         let mut pieces = Vec::new();
         let mut cells = Vec::with_capacity(cols as usize * rows as usize);
@@ -311,6 +329,14 @@ impl Pieces {
         height: u32,
         tolerance: Tolerance,
     ) -> Result<(Pieces, Deviation)> {
+        Pieces::for_tolerance_on(&ViewAt::new(view, width, height)?, tolerance)
+    }
+
+    /// [`Pieces::for_tolerance`] of any directions.
+    pub fn for_tolerance_on(
+        dirs: &dyn Directions,
+        tolerance: Tolerance,
+    ) -> Result<(Pieces, Deviation)> {
         let counts = |limit: u32| -> Vec<u32> {
             let mut v: Vec<u32> = [1, 3]
                 .iter()
@@ -320,12 +346,13 @@ impl Pieces {
             v.sort_unstable();
             v
         };
+        let (width, height) = dirs.size();
         crate::raster::check_size(width, height, 1)?;
         let (cols, rows) = (counts(width / 2), counts(height / 2));
-        let facts = Facts::new(view, width, height);
+        let facts = Facts::new(dirs);
         let meets = |c: u32, r: u32| -> Option<Pieces> {
-            let p = Pieces::cut(view, &facts, c, r).ok()?;
-            let d = p.deviation(view, Sampling::Lattice(7));
+            let p = Pieces::cut(dirs, &facts, c, r).ok()?;
+            let d = p.deviation(dirs, Sampling::Lattice(7));
             tolerance.met(d.angle, d.pixels).then_some(p)
         };
         let mut best: Option<(Pieces, Deviation)> = None;
@@ -360,7 +387,7 @@ impl Pieces {
                 continue;
             }
             // The lattice may miss a cell's worst pixel: confirm everywhere.
-            let d = found.measure(view);
+            let d = found.measure_on(dirs);
             if tolerance.met(d.angle, d.pixels) {
                 best = Some((found, d));
             }
@@ -369,7 +396,7 @@ impl Pieces {
             Error::invalid(
                 "tolerance",
                 format!(
-                    "{}: no cut into at most {MAX_PIECES} pieces meets it for this view at {width}×{height}",
+                    "{}: no cut into at most {MAX_PIECES} pieces meets it for these directions at {width}×{height}",
                     tolerance.describe()
                 ),
             )
@@ -424,10 +451,18 @@ impl Pieces {
 
     /// The deviation from the true projection at every pixel centre the view shows.
     pub fn measure(&self, view: &View) -> Deviation {
-        self.deviation(view, Sampling::Every)
+        match ViewAt::new(view, self.width, self.height) {
+            Ok(dirs) => self.measure_on(&dirs),
+            Err(_) => unreachable!("the pieces' size passed the same check"),
+        }
     }
 
-    fn deviation(&self, view: &View, sampling: Sampling) -> Deviation {
+    /// [`Pieces::measure`] against any directions of the pieces' size.
+    pub fn measure_on(&self, dirs: &dyn Directions) -> Deviation {
+        self.deviation(dirs, Sampling::Every)
+    }
+
+    fn deviation(&self, dirs: &dyn Directions, sampling: Sampling) -> Deviation {
         let (w, h) = (self.width, self.height);
         let points: Vec<(u32, u32)> = match sampling {
             Sampling::Every => (0..h).flat_map(|j| (0..w).map(move |i| (i, j))).collect(),
@@ -448,10 +483,7 @@ impl Pieces {
                     .iter()
                     .filter_map(|&(i, j)| {
                         let (x, y) = (f64::from(i) + 0.5, f64::from(j) + 0.5);
-                        Some(angle_between(
-                            true_direction(view, x, y, w, h)?,
-                            self.ray(i, j)?,
-                        ))
+                        Some(angle_between(dirs.at(x, y).0?, self.ray(i, j)?))
                     })
                     .fold(0.0, f64::max)
             })
@@ -463,28 +495,27 @@ impl Pieces {
     }
 }
 
-/// What every cut of one view at one size shares: its median pixel pitch, and (computed on
-/// first need) which pixels it shows nothing at.
+/// What every cut of one output shares: its median pixel pitch, and (computed on first need)
+/// which pixels it shows nothing at (`None`: it shows something everywhere).
 struct Facts {
-    width: u32,
-    height: u32,
     pitch: f64,
-    hidden: std::sync::OnceLock<std::sync::Arc<Vec<bool>>>,
+    hidden: std::sync::OnceLock<Option<std::sync::Arc<Vec<bool>>>>,
 }
 
 impl Facts {
-    fn new(view: &View, width: u32, height: u32) -> Facts {
+    fn new(dirs: &dyn Directions) -> Facts {
         Facts {
-            width,
-            height,
-            pitch: median_pitch(view, width, height),
+            pitch: median_pitch_on(dirs),
             hidden: std::sync::OnceLock::new(),
         }
     }
 
-    fn hidden(&self, view: &View) -> std::sync::Arc<Vec<bool>> {
+    fn hidden(&self, dirs: &dyn Directions) -> Option<std::sync::Arc<Vec<bool>>> {
         self.hidden
-            .get_or_init(|| std::sync::Arc::new(hidden_pixels(view, self.width, self.height)))
+            .get_or_init(|| {
+                let h = hidden_pixels(dirs);
+                h.contains(&true).then(|| std::sync::Arc::new(h))
+            })
             .clone()
     }
 }
@@ -494,91 +525,11 @@ enum Sampling {
     Lattice(u32),
 }
 
-/// How corner directions are scaled so that the usual pieces are parallelograms.
-enum Scale {
-    /// Unit horizontal length about the cylinder's axis.
-    Cylinder(DVec3),
-    /// Unit length along the view's axis.
-    Plane(DVec3),
-    Unit,
-}
-
-impl Scale {
-    fn of(view: &View) -> Scale {
-        let (turn, offaxis, _) = view.parts();
-        if offaxis != DVec3::ZERO {
-            return Scale::Unit;
-        }
-        match view.projection().name() {
-            "cylindrical" => Scale::Cylinder(turn * DVec3::Y),
-            "cylindrical-vertical" => Scale::Cylinder(turn * DVec3::X),
-            "flat" => Scale::Plane(turn * DVec3::NEG_Z),
-            _ => Scale::Unit,
-        }
-    }
-
-    fn apply(&self, d: DVec3) -> DVec3 {
-        match self {
-            Scale::Cylinder(axis) => {
-                let across = (d - d.dot(*axis) * *axis).length();
-                if across > 1e-9 { d / across } else { d }
-            }
-            Scale::Plane(axis) => {
-                let along = d.dot(*axis);
-                if along > 1e-9 { d / along } else { d }
-            }
-            Scale::Unit => d,
-        }
-    }
-}
-
-/// The view's unit direction at pixel position (x, y), where it has one.
-pub fn true_direction(view: &View, x: f64, y: f64, width: u32, height: u32) -> Option<DVec3> {
-    let (s, t) = screen_of_pixel(x, y, width, height);
-    view.direction(s, t)
-        .or_else(|_| view.direction_unbounded(s, t))
-        .ok()
-}
-
-fn angle_between(a: DVec3, b: DVec3) -> f64 {
-    a.cross(b).length().atan2(a.dot(b))
-}
-
-/// The output's typical pixel: the median angle between neighbouring pixel centres, over a
-/// lattice of about 64 × 64 pixels. A median, not the local pitch, so that pixels which span
-/// almost no angle (an equirect's rows at a pole) do not make every tolerance unreachable.
-pub fn median_pitch(view: &View, w: u32, h: u32) -> f64 {
-    let mut pitches: Vec<f64> = (0..64u32)
-        .flat_map(|b| (0..64u32).map(move |a| (a, b)))
-        .filter_map(|(a, b)| {
-            let (x, y) = (
-                (f64::from(a) + 0.5) * f64::from(w - 1) / 64.0 + 0.5,
-                (f64::from(b) + 0.5) * f64::from(h - 1) / 64.0 + 0.5,
-            );
-            let d = true_direction(view, x, y, w, h)?;
-            let right = true_direction(view, x + 1.0, y, w, h)?;
-            let down = true_direction(view, x, y + 1.0, w, h)?;
-            Some([angle_between(d, right), angle_between(d, down)])
-        })
-        .flatten()
-        .filter(|a| a.is_finite() && *a > 0.0)
-        .collect();
-    if pitches.is_empty() {
-        return f64::NAN;
-    }
-    pitches.sort_by(f64::total_cmp);
-    pitches[pitches.len() / 2]
-}
-
-fn hidden_pixels(view: &View, w: u32, h: u32) -> Vec<bool> {
+fn hidden_pixels(dirs: &dyn Directions) -> Vec<bool> {
+    let (w, h) = dirs.size();
     (0..h)
         .into_par_iter()
-        .flat_map_iter(|j| {
-            (0..w).map(move |i| {
-                let (s, t) = screen_of_pixel(f64::from(i) + 0.5, f64::from(j) + 0.5, w, h);
-                view.direction(s, t).is_err()
-            })
-        })
+        .flat_map_iter(|j| (0..w).map(move |i| !dirs.at(f64::from(i) + 0.5, f64::from(j) + 0.5).1))
         .collect()
 }
 

@@ -20,6 +20,7 @@ mod meshes;
 mod outputs;
 mod preview;
 mod rig;
+mod scenes;
 mod state;
 mod store;
 

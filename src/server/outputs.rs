@@ -10,12 +10,15 @@
 use super::ApiError;
 use super::jobs::{etag, inputs, job, job_from, run_job};
 use super::keep::warp_file;
-use super::preview::{Ask, Grid, Look, Made, default_face};
+use super::preview::{Ask, Grid, Look, Made, default_face, finish};
+use super::scenes::{SceneAsk, SceneMethod};
 use super::state::{AppState, Query};
 use crate::content::pattern::Pattern;
+use crate::gpu::Renderer;
 use crate::image_io::{Compression, Precision, exr_bytes, png_bytes_with};
 use crate::render::Filter;
 use crate::rig::{BlendOptions, blend_png_bytes};
+use crate::scene::ppp::Tolerance;
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
 use axum::http::header;
@@ -155,6 +158,28 @@ pub struct RenderQuery {
     /// PNG compression: `fast` (default), `balanced` or `high`.
     #[serde(default)]
     compression: Option<String>,
+    /// A procedural 3D scene to show instead of the test pattern (`scenes::SCENES`).
+    #[serde(default)]
+    scene: Option<String>,
+    /// How the scene reaches the channel: `cube`, `ppp`, `exact` or `auto`.
+    #[serde(default)]
+    method: Option<String>,
+    /// For `ppp` and `auto`: the largest sampling error allowed (`0.25px`, `0.05deg`).
+    #[serde(default)]
+    tolerance: Option<String>,
+}
+
+/// A preview of `ow` × `oh` pixels is within [`MAX_PREVIEW`].
+fn check_preview_size(ow: usize, oh: usize) -> Result<(), ApiError> {
+    if ow * oh > MAX_PREVIEW {
+        return Err(invalid(
+            "scale",
+            format!(
+                "{ow}×{oh} is above the preview limit of {MAX_PREVIEW} pixels; use a larger scale"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn invalid(field: &str, reason: impl Into<String>) -> ApiError {
@@ -219,6 +244,17 @@ pub async fn render(
         None => Compression::Fast,
         Some(c) => Compression::parse(c).map_err(|e| invalid("compression", e.reason()))?,
     };
+    if let Some(name) = q.scene.as_deref() {
+        return render_scene(s, id, &q, name, scale as usize, compression).await;
+    }
+    for (field, given) in [("method", &q.method), ("tolerance", &q.tolerance)] {
+        if given.is_some() {
+            return Err(invalid(
+                field,
+                "applies to scene previews (scene=city:small or city:medium); the test pattern is sampled from its cube map",
+            ));
+        }
+    }
     let gpu = match q.renderer.as_deref().unwrap_or("cpu") {
         "cpu" => None,
         r @ ("gpu" | "auto") => {
@@ -245,14 +281,7 @@ pub async fn render(
     let (w, h) = (j.computed.map.width(), j.computed.map.height());
     let k = scale as usize;
     let (ow, oh) = (w.div_ceil(k), h.div_ceil(k));
-    if ow * oh > MAX_PREVIEW {
-        return Err(invalid(
-            "scale",
-            format!(
-                "{ow}×{oh} is above the preview limit of {MAX_PREVIEW} pixels; use a larger scale"
-            ),
-        ));
-    }
+    check_preview_size(ow, oh)?;
     let etag = j.etag();
     let (computed, key) = (j.computed.clone(), j.key);
     let state = s.clone();
@@ -333,6 +362,104 @@ pub async fn render(
                 h.insert(name, v);
             }
         }
+    }
+    Ok(resp)
+}
+
+/// A channel's preview showing a procedural scene, drawn by the method asked for
+/// (`scenes::ScenePreviews`), with the tiles' f and the blend applied as for the pattern.
+async fn render_scene(
+    s: Arc<AppState>,
+    id: String,
+    q: &RenderQuery,
+    name: &str,
+    k: usize,
+    compression: Compression,
+) -> Result<Response, ApiError> {
+    let scene = SceneAsk::scene(name)?;
+    for (field, wrong, reason) in [
+        (
+            "format",
+            q.format.as_deref().is_some_and(|f| f != "png"),
+            "scene previews are 8-bit PNG",
+        ),
+        (
+            "filter",
+            q.filter.as_deref().is_some_and(|f| f != "bilinear"),
+            "scene previews sample their cube map bilinearly",
+        ),
+        (
+            "content",
+            q.content.is_some(),
+            "a scene preview shows the scene, not the test pattern",
+        ),
+    ] {
+        if wrong {
+            return Err(invalid(field, reason));
+        }
+    }
+    let method = SceneMethod::parse(q.method.as_deref().unwrap_or("cube"))?;
+    if q.tolerance.is_some() && !matches!(method, SceneMethod::Ppp | SceneMethod::Auto) {
+        return Err(invalid(
+            "tolerance",
+            "chooses the cut of method=ppp or the method of method=auto",
+        ));
+    }
+    if q.face.is_some() && method != SceneMethod::Cube {
+        return Err(invalid("face", "the cube's face size, for method=cube"));
+    }
+    let tolerance = Tolerance::parse(q.tolerance.as_deref().unwrap_or("0.25px"))?;
+    let renderer = match q.renderer.as_deref().unwrap_or("cpu") {
+        "cpu" => Renderer::Cpu,
+        "gpu" => {
+            if s.gpu().is_none() {
+                return Err(invalid("renderer", "this machine has no GPU adapter"));
+            }
+            Renderer::Gpu
+        }
+        "auto" => {
+            if s.gpu().is_some() {
+                Renderer::Gpu
+            } else {
+                Renderer::Cpu
+            }
+        }
+        other => {
+            return Err(invalid(
+                "renderer",
+                format!("must be cpu, gpu or auto, got `{other}`"),
+            ));
+        }
+    };
+    let ask = SceneAsk {
+        scene,
+        method,
+        tolerance,
+        renderer,
+        face: q.face.map(|f| f as u32),
+    };
+    let j = job(&s, &id).await?;
+    let (w, h) = (j.computed.map.width(), j.computed.map.height());
+    let (ow, oh) = (w.div_ceil(k), h.div_ceil(k));
+    check_preview_size(ow, oh)?;
+    let etag = j.etag();
+    let (computed, key) = (j.computed.clone(), j.key);
+    let state = s.clone();
+    let (png, said) = run_job(&s, move |cancel| {
+        let grid = Grid::new(w, h, k);
+        let map = grid.map(&computed.map)?;
+        let (mut img, said) = state
+            .scene_previews
+            .render(&ask, (&id, key, k), &map, cancel)?;
+        let weights = grid.values(&computed.geometry.weights);
+        let f = computed.f.as_ref().map(|f| grid.values(f));
+        finish(&mut img, &weights, f.as_deref());
+        Ok((png_bytes_with(&img, compression)?, said))
+    })
+    .await?;
+    let mut resp = file(&s, png, "image/png", &etag)?;
+    if let Ok(v) = said.parse() {
+        resp.headers_mut().insert("x-omniwarp-method", v);
     }
     Ok(resp)
 }

@@ -34,6 +34,15 @@ fn apply_gains<T: Pixel>(img: &mut Raster<T>, gains: &[f32]) {
         });
 }
 
+/// A channel's picture made a preview: desaturated by the tiles' f and attenuated by the blend
+/// weights (raised to 1/2.2: PNG previews are in signal space).
+pub fn finish(img: &mut Raster<[u8; 4]>, weights: &[f32], f: Option<&[f32]>) {
+    if let Some(f) = f {
+        crate::tiles::raster::saturation(img, f);
+    }
+    apply_gains(img, &gains(weights, 2.2));
+}
+
 /// The cube face size a preview uses unless asked for one: texels as fine as the preview's
 /// finest pixels, so the pattern's edges show the warp, not the cube's stair steps; 32-bit
 /// previews stop at 1024 (six such faces are 100 MB, as six 8-bit faces of 2048 are).

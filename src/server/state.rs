@@ -85,6 +85,8 @@ pub struct AppState {
     pub pattern_cubes: super::preview::PatternCubes,
     /// CPU previews ready to render again.
     pub previews: super::preview::Previews,
+    /// Scene previews' renderer and the cuts and choices made for them.
+    pub scene_previews: super::scenes::ScenePreviews,
     /// Writes computed warps to disk after the requests that computed them.
     pub keeper: super::keep::Keeper,
 }
@@ -116,6 +118,7 @@ impl AppState {
             gpu: std::sync::OnceLock::new(),
             pattern_cubes: Default::default(),
             previews: Default::default(),
+            scene_previews: Default::default(),
             keeper: Default::default(),
         })
     }
