@@ -515,6 +515,25 @@ fn the_cli_renders_a_scene_piecewise() {
         !bad.status.success() && said.contains("--tolerance"),
         "{said}"
     );
+    // The chart's peers warp a cube as ffmpeg's cylindrical output does: any other view is
+    // refused before anything is drawn.
+    for view in [
+        "--projection equirect",
+        "--projection cylindrical --hfov 360 --vfov 90 --look-to 1,0,0",
+    ] {
+        let bad = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+            .args("bench chart --scene city:small --size 64x32 --peers".split(' '))
+            .args(view.split(' '))
+            .arg("--name")
+            .arg(dir.path().join("chart"))
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&bad.stderr);
+        assert!(
+            !bad.status.success() && said.contains("--peers") && said.contains("straight ahead"),
+            "{said}"
+        );
+    }
 }
 
 #[test]

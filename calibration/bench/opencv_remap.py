@@ -1,11 +1,12 @@
 """Times OpenCV's cv2.remap with float maps on the bench's input, for scripts/bench-peers.
 
-The maps send each pixel of a cylindrical 270°×90° view to the cube map in ffmpeg's c6x1
+The maps send each pixel of a cylindrical view (270°×90° unless told) to the cube map in ffmpeg's c6x1
 layout (docs/conventions.md's directions and face table; ffmpeg's slots mirror our faces, see
 omniwarp::cubemap::Layout). OpenCV filters one image, so lookups across face edges clamp
 instead of reading the neighbour face; that costs it a little PSNR, not time.
 
-usage: opencv_remap.py CUBE_C6X1.png WIDTH HEIGHT FRAMES THREADS OUT.png [nearest|bilinear|bicubic]
+usage: opencv_remap.py CUBE_C6X1.png WIDTH HEIGHT FRAMES THREADS OUT.png [nearest|bilinear|bicubic [HFOV VFOV]]
+(HFOV and VFOV in degrees, default 270 and 90: the cylindrical view's field.)
 """
 import sys
 import time
@@ -14,12 +15,12 @@ import cv2
 import numpy as np
 
 
-def maps(n, w, h):
+def maps(n, w, h, hfov=270.0, vfov=90.0):
     s = (2.0 * (np.arange(w) + 0.5) / w - 1.0)[None, :]
     t = (1.0 - 2.0 * (np.arange(h) + 0.5) / h)[:, None]
-    lon = s * np.radians(135.0)
+    lon = s * np.radians(hfov / 2.0)
     x = np.broadcast_to(np.sin(lon), (h, w))
-    y = np.broadcast_to(t * np.tan(np.radians(45.0)), (h, w))
+    y = np.broadcast_to(t * np.tan(np.radians(vfov / 2.0)), (h, w))
     z = np.broadcast_to(-np.cos(lon), (h, w))
     ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
     # Face table of docs/conventions.md: (slot in ffmpeg's r l u d f b, sc, tc, ma, mirror left-right).
@@ -53,6 +54,8 @@ def maps(n, w, h):
 def main():
     src_path, w, h, frames, threads, out = sys.argv[1:7]
     filter_name = sys.argv[7] if len(sys.argv) > 7 else "bilinear"
+    hfov = float(sys.argv[8]) if len(sys.argv) > 8 else 270.0
+    vfov = float(sys.argv[9]) if len(sys.argv) > 9 else 90.0
     interp = {
         "nearest": cv2.INTER_NEAREST,
         "bilinear": cv2.INTER_LINEAR,
@@ -62,7 +65,7 @@ def main():
     cv2.setNumThreads(threads)
     src = cv2.imread(src_path, cv2.IMREAD_UNCHANGED)
     n = src.shape[0]
-    mx, my = maps(n, w, h)
+    mx, my = maps(n, w, h, hfov, vfov)
     dst = None
     for _ in range(2):
         dst = cv2.remap(src, mx, my, interp, borderMode=cv2.BORDER_REPLICATE)

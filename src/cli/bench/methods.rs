@@ -17,18 +17,21 @@ use anyhow::{Result, bail};
 use clap::Args;
 use glam::DVec3;
 use omniwarp::content::Content;
+use omniwarp::cubemap::{CubeMap, Layout};
 use omniwarp::gpu::Renderer;
 use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
+use omniwarp::image_io::Loaded;
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::View;
 use omniwarp::raster::edges::{relative_edge_widths, spread};
 use omniwarp::raster::{Raster, psnr};
-use omniwarp::render::{self, Filter, Warp};
+use omniwarp::render::{Filter, Plan, Warp};
 use omniwarp::scene::Scene;
 use omniwarp::scene::ppp::{Pieces, Tolerance, true_direction};
 use omniwarp::tiles::adapt::rows_for;
 use omniwarp::tiles::build::from_source;
 use std::path::PathBuf;
+use std::process::Command;
 use std::time::Instant;
 
 #[derive(Args)]
@@ -55,6 +58,11 @@ pub struct MethodChartArgs {
     /// supersampled methods approximate.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4))]
     pub reference_samples: u32,
+    /// Also ffmpeg's v360 and OpenCV's remap warping the same cube read back, with each of
+    /// their filters (cylindrical views seen straight ahead only). ffmpeg from PATH, OpenCV
+    /// from target/bench-venv or python3; scripts/bench-peers installs both.
+    #[arg(long)]
+    pub peers: bool,
     /// Where the chart goes: NAME.csv and NAME.svg.
     #[arg(long, default_value = "calibration/charts/methods")]
     pub name: PathBuf,
@@ -136,6 +144,18 @@ fn mark_front(rows: &mut [Row]) {
 
 pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
     let (w, h) = a.size;
+    let p = &a.projection;
+    if a.peers
+        && (p.projection.as_deref() != Some("cylindrical")
+            || p.look_to != DVec3::NEG_Z
+            || p.look_up != DVec3::Y
+            || p.offaxis != DVec3::ZERO
+            || p.zoom != 1.0)
+    {
+        bail!(
+            "--peers: ffmpeg's and OpenCV's rows are drawn for --projection cylindrical seen straight ahead (no --look-to, --look-up, --offaxis or --zoom)"
+        );
+    }
     let view = a.projection.view(w, h)?;
     let source = a.projection.source(w, h)?;
     let scene = Scene::load(spec).map_err(|e| anyhow::anyhow!("--scene: {}", e.reason()))?;
@@ -235,25 +255,34 @@ pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
         (Filter::Bicubic, 2),
         (Filter::Bilinear, 4),
     ];
+    // The cube drawn and read back, then warped in steady state (the plan built once, as the
+    // frame loop and the peers' rows do); each new cube needs its atlas made again.
+    let cube = gpu.cube_map(a.eye, face)?;
+    let cube_ms = median_ms(a.frames, || {
+        gpu.invalidate();
+        gpu.cube_map(a.eye, face).map(|_| ()).map_err(Into::into)
+    })?;
     for (filter, ss) in filters {
-        let frame = |gpu: &mut SceneRenderer| -> Result<Raster<[u8; 4]>> {
-            let cube = gpu.cube_map(a.eye, face)?;
-            Ok(render::render(
-                Warp::View(&view),
-                &Content::cube(&cube),
-                w,
-                h,
-                ss,
-                filter,
-            )?)
-        };
-        let img = frame(&mut gpu)?;
+        let content = Content::cube(&cube);
+        let plan = Plan::new(
+            Warp::View(&view),
+            &content,
+            content.atlas(),
+            w,
+            h,
+            ss,
+            filter,
+        )?;
+        let img = plan.render(content.atlas())?;
         let ms = median_ms(a.frames, || {
-            gpu.invalidate();
-            frame(&mut gpu).map(|_| ())
+            let content = Content::cube(&cube);
+            plan.render(content.atlas()).map(|_| ()).map_err(Into::into)
         })?;
         let setting = format!("{face}² read back, CPU {filter:?} ×{ss}²").to_lowercase();
-        push("cube+cpu warp", setting, "gpu", ms, &img, None);
+        push("cube+cpu warp", setting, "gpu", cube_ms + ms, &img, None);
+    }
+    if a.peers {
+        peer_rows(&a, (&cube, cube_ms), &mut push)?;
     }
     let mut cuts: Vec<(String, Pieces)> = Vec::new();
     for t in ["1px", "0.5px", "0.25px", "0.1px"] {
@@ -359,6 +388,145 @@ pub fn run(a: MethodChartArgs, spec: &str) -> Result<()> {
             if r.front { "*" } else { "" }
         );
     }
+    Ok(())
+}
+
+/// A row's measurements as `run`'s `push` takes them.
+type Push<'a> =
+    dyn FnMut(&'static str, String, &'static str, f64, &Raster<[u8; 4]>, Option<(f64, f64)>) + 'a;
+
+/// The peers' rows: the cube drawn on the GPU and read back (`cube_ms`, as our own read-back
+/// rows), written in ffmpeg's c6x1 layout, warped by ffmpeg's v360 and OpenCV's
+/// remap with each of their filters. Their time a frame is the cube's plus their steady-state
+/// warp (ffmpeg: the difference between runs of 1 and 1 + N looped frames, so decoding and
+/// start-up cancel; OpenCV: the median `cv2.remap` with its maps built once), same threads.
+fn peer_rows(
+    a: &MethodChartArgs,
+    (cube, cube_ms): (&CubeMap<[u8; 4]>, f64),
+    push: &mut Push<'_>,
+) -> Result<()> {
+    let face = cube.size;
+    let (w, h) = a.size;
+    let (hfov, vfov) = (
+        a.projection.hfov.unwrap_or(360.0),
+        a.projection.vfov.unwrap_or(90.0),
+    );
+    let dir = std::env::temp_dir().join(format!("omniwarp-chart-peers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let input = dir.join("cube.png");
+    omniwarp::image_io::write_png(&input, &Layout::FfmpegC6x1.join(cube))?;
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let frames = 20;
+    let read = |path: &std::path::Path| -> Result<Raster<[u8; 4]>> {
+        match omniwarp::image_io::read_image(path)? {
+            Loaded::U8(img) => Ok(img),
+            Loaded::F32(_) => bail!("{}: expected an 8-bit image", path.display()),
+        }
+    };
+    let run = |cmd: &mut Command| -> Result<std::process::Output> {
+        let out = cmd
+            .output()
+            .map_err(|e| anyhow::anyhow!("--peers: {cmd:?}: {e}"))?;
+        if !out.status.success() {
+            bail!(
+                "--peers: {cmd:?} failed: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        Ok(out)
+    };
+    for (filter, interp) in [
+        ("nearest", "near"),
+        ("bilinear", "linear"),
+        ("bicubic", "cubic"),
+    ] {
+        let vf = format!(
+            "v360=input=c6x1:output=cylindrical:h_fov={hfov}:v_fov={vfov}:w={w}:h={h}:interp={interp}"
+        );
+        let out = dir.join(format!("ffmpeg-{filter}.png"));
+        let ffmpeg = || {
+            let mut c = Command::new("ffmpeg");
+            c.args(["-nostdin", "-loglevel", "error", "-y", "-filter_threads"])
+                .arg(threads.to_string())
+                .arg("-i")
+                .arg(&input);
+            c
+        };
+        run(ffmpeg()
+            .args([
+                "-vf",
+                &format!("format=gbrp,{vf},format=rgba"),
+                "-frames:v",
+                "1",
+            ])
+            .arg(&out))?;
+        let timed = |loops: u32| -> Result<f64> {
+            let start = Instant::now();
+            run(ffmpeg().args([
+                "-vf",
+                &format!("format=gbrp,loop=loop={loops}:size=1,{vf}"),
+                "-f",
+                "null",
+                "-",
+            ]))?;
+            Ok(start.elapsed().as_secs_f64() * 1e3)
+        };
+        let mut per_frame: Vec<f64> = (0..3)
+            .map(|_| Ok((timed(frames)? - timed(0)?) / f64::from(frames)))
+            .collect::<Result<_>>()?;
+        per_frame.sort_by(f64::total_cmp);
+        let setting = format!("{face}² read back, v360 {filter}");
+        push(
+            "ffmpeg v360",
+            setting,
+            "gpu",
+            cube_ms + per_frame[1],
+            &read(&out)?,
+            None,
+        );
+    }
+    let python = ["target/bench-venv/bin/python", "python3"]
+        .into_iter()
+        .find(|py| {
+            Command::new(py)
+                .args(["-c", "import cv2"])
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+        .ok_or_else(|| anyhow::anyhow!("--peers: no Python with OpenCV (scripts/bench-peers installs one in target/bench-venv)"))?;
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/bench/opencv_remap.py");
+    for filter in ["nearest", "bilinear", "bicubic"] {
+        let out = dir.join(format!("opencv-{filter}.png"));
+        let said = run(Command::new(python)
+            .arg(&script)
+            .arg(&input)
+            .args([
+                w.to_string(),
+                h.to_string(),
+                frames.to_string(),
+                threads.to_string(),
+            ])
+            .arg(&out)
+            .args([filter.to_string(), hfov.to_string(), vfov.to_string()]))?;
+        let said = String::from_utf8_lossy(&said.stdout);
+        let ms: f64 = said
+            .split(" ms/frame")
+            .next()
+            .and_then(|head| head.rsplit(' ').next())
+            .and_then(|n| n.parse().ok())
+            .ok_or_else(|| anyhow::anyhow!("--peers: OpenCV said `{said}`"))?;
+        let setting = format!("{face}² read back, remap {filter}");
+        push(
+            "opencv remap",
+            setting,
+            "gpu",
+            cube_ms + ms,
+            &read(&out)?,
+            None,
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
 
