@@ -228,6 +228,9 @@ impl PppPass {
                     k += 1;
                 }
             }
+            // wgpu's GL backend resolves the multisampled target with a blit at the pass's
+            // end, under the scissor still set: only the last piece would be resolved.
+            pass.set_scissor_rect(0, 0, w, h);
         }
         gpu.queue.submit([enc.finish()]);
         let mut img = read_rgba8(gpu, &target, w, h)?;
