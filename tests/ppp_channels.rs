@@ -26,6 +26,7 @@ fn pieces_cut_from_a_warp_map_cover_it_within_the_tolerance() {
         let (pieces, d) = Pieces::for_tolerance_on(&map, Tolerance::Pixels(t)).unwrap();
         assert!(d.pixels <= t, "{}: {d:?}", ch.id);
         let mut worst: f64 = 0.0;
+        let mut mapped = 0;
         for j in 0..h {
             for i in 0..w {
                 let truth = map.direction(i as usize, j as usize);
@@ -40,9 +41,16 @@ fn pieces_cut_from_a_warp_map_cover_it_within_the_tolerance() {
                 );
                 if let (Some(a), Some(b)) = (truth, drawn) {
                     worst = worst.max(a.angle_between(b));
+                    mapped += 1;
                 }
             }
         }
+        // A map that lost its coverage would pass the checks above over nothing.
+        assert!(
+            mapped as f64 >= 0.5 * f64::from(w * h),
+            "{}: {mapped} pixels mapped",
+            ch.id
+        );
         assert!(worst <= t * pieces.pitch, "{}: {worst}", ch.id);
         eprintln!(
             "{}: {}×{} cells, {} pieces, {:.3} px",

@@ -39,11 +39,16 @@ pub struct ViewAt<'a> {
 impl<'a> ViewAt<'a> {
     pub fn new(view: &'a View, width: u32, height: u32) -> Result<ViewAt<'a>> {
         crate::raster::check_size(width, height, 1)?;
-        Ok(ViewAt {
+        Ok(ViewAt::sized(view, width, height))
+    }
+
+    /// [`ViewAt::new`] for a size already checked.
+    pub(super) fn sized(view: &'a View, width: u32, height: u32) -> ViewAt<'a> {
+        ViewAt {
             view,
             width,
             height,
-        })
+        }
     }
 }
 
@@ -233,10 +238,7 @@ impl Scale {
 
 /// The view's unit direction at pixel position (x, y), where it has one.
 pub fn true_direction(view: &View, x: f64, y: f64, width: u32, height: u32) -> Option<DVec3> {
-    let (s, t) = screen_of_pixel(x, y, width, height);
-    view.direction(s, t)
-        .or_else(|_| view.direction_unbounded(s, t))
-        .ok()
+    ViewAt::sized(view, width, height).at(x, y).0
 }
 
 pub(super) fn angle_between(a: DVec3, b: DVec3) -> f64 {

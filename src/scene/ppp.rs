@@ -451,10 +451,7 @@ impl Pieces {
 
     /// The deviation from the true projection at every pixel centre the view shows.
     pub fn measure(&self, view: &View) -> Deviation {
-        match ViewAt::new(view, self.width, self.height) {
-            Ok(dirs) => self.measure_on(&dirs),
-            Err(_) => unreachable!("the pieces' size passed the same check"),
-        }
+        self.measure_on(&ViewAt::sized(view, self.width, self.height))
     }
 
     /// [`Pieces::measure`] against any directions of the pieces' size.

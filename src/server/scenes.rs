@@ -16,7 +16,7 @@ use crate::gpu::warp::Source;
 use crate::normalmap::NormalMap;
 use crate::raster::Raster;
 use crate::scene::Scene;
-use crate::scene::ppp::{Pieces, Tolerance};
+use crate::scene::ppp::{Deviation, Pieces, Tolerance};
 use glam::DVec3;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -80,7 +80,7 @@ impl SceneAsk {
 /// A cut or a choice made for one warp, kept: both cost more than the frame they serve.
 #[derive(Clone)]
 enum Decided {
-    Pieces(Pieces, f64, f64),
+    Pieces(Pieces, Deviation),
     Chosen(Method, f64),
 }
 
@@ -150,9 +150,9 @@ impl ScenePreviews {
                 let decided = kept.decide(ask, (id, key, scale), map, &o)?;
                 stop()?;
                 match decided {
-                    Decided::Pieces(p, angle, pixels) => {
+                    Decided::Pieces(p, d) => {
                         let (img, said) = ppp_frame(&mut kept.r, &p, &o)?;
-                        let error = format!("{:.4} deg ({pixels:.3} px)", angle.to_degrees());
+                        let error = format!("{:.4} deg ({:.3} px)", d.angle.to_degrees(), d.pixels);
                         (img, format!("{said}, max error {error}"))
                     }
                     Decided::Chosen(method, angle) => {
@@ -203,7 +203,7 @@ impl Kept {
         }
         let d = if ask.method == SceneMethod::Ppp {
             let (p, d) = Pieces::for_tolerance_on(map, ask.tolerance)?;
-            Decided::Pieces(p, d.angle, d.pixels)
+            Decided::Pieces(p, d)
         } else {
             let max_face = if self.r.on_gpu() { 4096 } else { 2048 };
             let c =

@@ -402,6 +402,21 @@ type Push<'a> =
 /// start-up cancel; OpenCV: the median `cv2.remap` with its maps built once), same threads.
 fn peer_rows(
     a: &MethodChartArgs,
+    cube: (&CubeMap<[u8; 4]>, f64),
+    push: &mut Push<'_>,
+) -> Result<()> {
+    let dir = std::env::temp_dir().join(format!("omniwarp-chart-peers-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let done = peer_rows_in(&dir, a, cube, push);
+    // The peers' inputs and outputs go whether they ran or failed.
+    let _ = std::fs::remove_dir_all(&dir);
+    done
+}
+
+/// [`peer_rows`] with its files in `dir`.
+fn peer_rows_in(
+    dir: &std::path::Path,
+    a: &MethodChartArgs,
     (cube, cube_ms): (&CubeMap<[u8; 4]>, f64),
     push: &mut Push<'_>,
 ) -> Result<()> {
@@ -411,8 +426,6 @@ fn peer_rows(
         a.projection.hfov.unwrap_or(360.0),
         a.projection.vfov.unwrap_or(90.0),
     );
-    let dir = std::env::temp_dir().join(format!("omniwarp-chart-peers-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
     let input = dir.join("cube.png");
     omniwarp::image_io::write_png(&input, &Layout::FfmpegC6x1.join(cube))?;
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
@@ -526,7 +539,6 @@ fn peer_rows(
             None,
         );
     }
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
 

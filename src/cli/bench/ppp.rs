@@ -78,6 +78,17 @@ pub fn run(a: PppBenchArgs) -> Result<()> {
         "  case             | method                     | ms/frame | ratio to image-based | replication | PSNR vs exact | seed ratio | seed replication"
     );
     for ((name, view, cut), seed) in cases.iter().zip(SEED) {
+        let chosen = Pieces::for_tolerance(view, w, h, Tolerance::Pixels(0.25))?.0;
+        let seeds = Pieces::new(view, w, h, cut.0, cut.1)?;
+        let cuts = [
+            (format!("PPP, {}×{} cells", cut.0, cut.1), &seeds),
+            (
+                format!("PPP, 0.25 px: {}×{}", chosen.cols, chosen.rows),
+                &chosen,
+            ),
+        ];
+        let hq_cuts =
+            [&seeds, &chosen].map(|p| (format!("HQ PPP, {}×{}, 4× MSAA", p.cols, p.rows), p));
         let exact = r.frame_exact(view, &o)?;
         let db = |img: &Raster<[u8; 4]>| psnr(img, &exact, 255.0, |_, _| true);
         let (img, _) = r.frame(view, &o)?;
@@ -85,37 +96,14 @@ pub fn run(a: PppBenchArgs) -> Result<()> {
             r.invalidate();
             r.frame(view, &o).map(|_| ()).map_err(Into::into)
         })?;
-        outln!(
-            "  {name:<16} | image-based, 2048² cube    | {cube_ms:8.1} | {:20.2} | {:>11} | {:10.2} dB | {:>10} | {:>16}",
-            1.0,
-            "-",
-            db(&img),
-            "1.00",
-            "-"
-        );
-        let chosen = Pieces::for_tolerance(view, w, h, Tolerance::Pixels(0.25))?.0;
-        let seeds = Pieces::new(view, w, h, cut.0, cut.1)?;
-        let (chosen, seeds) = (&chosen, &seeds);
-        for (label, pieces) in [
-            (format!("PPP, {}×{} cells", cut.0, cut.1), seeds),
-            (
-                format!("PPP, 0.25 px: {}×{}", chosen.cols, chosen.rows),
-                chosen,
-            ),
-        ] {
-            let (img, report) = r.frame_ppp(pieces, &o)?;
-            let ms = median_ms(a.frames, || {
-                r.frame_ppp(pieces, &o).map(|_| ()).map_err(Into::into)
-            })?;
-            outln!(
-                "  {name:<16} | {label:<26} | {ms:8.1} | {:20.2} | {:11.2} | {:10.2} dB | {:10.2} | {:16.2}",
-                cube_ms / ms,
-                report.replication.unwrap_or(f64::NAN),
-                db(&img),
-                seed.2 / seed.1,
-                seed.3
-            );
-        }
+        image_based_row(name, "image-based, 2048² cube", cube_ms, db(&img))?;
+        let plain = Quality {
+            base_ms: cube_ms,
+            msaa: false,
+            seed_ratio: seed.2 / seed.1,
+            seed_replication: seed.3,
+        };
+        ppp_rows(&mut r, a.frames, &o, name, &cuts, &plain, &db)?;
         // The high-quality rows, against the antialiased reference. Pixels the view's rim
         // (a fisheye's circle) crosses are left out: the reference averages only the rays
         // that have a direction, a method draws a pixel whole or not at all.
@@ -145,36 +133,14 @@ pub fn run(a: PppBenchArgs) -> Result<()> {
             let content = Content::cube(&cube);
             plan.render(content.atlas()).map(|_| ()).map_err(Into::into)
         })?;
-        outln!(
-            "  {name:<16} | HQ image-based, ×2² warp   | {hq_ms:8.1} | {:20.2} | {:>11} | {:10.2} dB | {:>10} | {:>16}",
-            1.0,
-            "-",
-            db(&img),
-            "1.00",
-            "-"
-        );
-        for (label, pieces) in [
-            (format!("HQ PPP, {}×{}, 4× MSAA", cut.0, cut.1), seeds),
-            (
-                format!("HQ PPP, {}×{}, 4× MSAA", chosen.cols, chosen.rows),
-                chosen,
-            ),
-        ] {
-            let (img, report) = r.frame_ppp_antialiased(pieces, &o)?;
-            let ms = median_ms(a.frames, || {
-                r.frame_ppp_antialiased(pieces, &o)
-                    .map(|_| ())
-                    .map_err(Into::into)
-            })?;
-            outln!(
-                "  {name:<16} | {label:<26} | {ms:8.1} | {:20.2} | {:11.2} | {:10.2} dB | {:10.2} | {:16.2}",
-                hq_ms / ms,
-                report.replication.unwrap_or(f64::NAN),
-                db(&img),
-                seed.5 / seed.4,
-                seed.3
-            );
-        }
+        image_based_row(name, "HQ image-based, ×2² warp", hq_ms, db(&img))?;
+        let hq = Quality {
+            base_ms: hq_ms,
+            msaa: true,
+            seed_ratio: seed.5 / seed.4,
+            seed_replication: seed.3,
+        };
+        ppp_rows(&mut r, a.frames, &o, name, &hq_cuts, &hq, &db)?;
     }
     outln!(
         "ratio: image-based time over the method's (above 1: faster than image-based); the seed's: PPP fps over image-based fps (GeForce 8800 GTS)"
@@ -182,5 +148,58 @@ pub fn run(a: PppBenchArgs) -> Result<()> {
     outln!(
         "HQ: PPP with 4× multisampling against the 2048² cube read back and warped on the CPU with 2×2 supersampling (our cube pass does not multisample its faces; the seed's HQ antialiased them 16xQ and filtered 16× anisotropically), PSNR against 4×4 rays a pixel (pixels on a fisheye's rim left out)"
     );
+    Ok(())
+}
+
+/// What a case's PPP rows are compared with: the image-based time at their quality, and the
+/// seed's figures.
+struct Quality {
+    base_ms: f64,
+    msaa: bool,
+    seed_ratio: f64,
+    seed_replication: f64,
+}
+
+fn image_based_row(name: &str, label: &str, ms: f64, db: f64) -> Result<()> {
+    outln!(
+        "  {name:<16} | {label:<26} | {ms:8.1} | {:20.2} | {:>11} | {db:10.2} dB | {:>10} | {:>16}",
+        1.0,
+        "-",
+        "1.00",
+        "-"
+    );
+    Ok(())
+}
+
+/// One row per cut, labelled: PPP (with 4× MSAA at high quality) timed against the
+/// image-based frame.
+fn ppp_rows(
+    r: &mut SceneRenderer,
+    frames: u16,
+    o: &FrameOptions,
+    name: &str,
+    cuts: &[(String, &Pieces)],
+    q: &Quality,
+    db: &dyn Fn(&Raster<[u8; 4]>) -> f64,
+) -> Result<()> {
+    for (label, pieces) in cuts {
+        let draw = |r: &mut SceneRenderer| {
+            if q.msaa {
+                r.frame_ppp_antialiased(pieces, o)
+            } else {
+                r.frame_ppp(pieces, o)
+            }
+        };
+        let (img, report) = draw(r)?;
+        let ms = median_ms(frames, || draw(r).map(|_| ()).map_err(Into::into))?;
+        outln!(
+            "  {name:<16} | {label:<26} | {ms:8.1} | {:20.2} | {:11.2} | {:10.2} dB | {:10.2} | {:16.2}",
+            q.base_ms / ms,
+            report.replication.unwrap_or(f64::NAN),
+            db(&img),
+            q.seed_ratio,
+            q.seed_replication
+        );
+    }
     Ok(())
 }
