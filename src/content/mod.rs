@@ -16,6 +16,7 @@ mod atlas;
 pub mod pattern;
 pub mod projective;
 pub mod residual;
+pub mod testcard;
 
 pub use atlas::{Atlas, PAD};
 

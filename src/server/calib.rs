@@ -57,6 +57,8 @@ pub async fn propose(
             .collect(),
         sigma: cal.fit.sigma.clone(),
         warnings: cal.warnings.clone(),
+        residuals: cal.fit.residuals.clone(),
+        outliers: cal.fit.outliers.clone(),
     };
     let (state, copy) = (s.clone(), proposal.clone());
     tokio::task::spawn_blocking(move || state.store.save_proposal(&copy))

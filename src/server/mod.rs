@@ -9,9 +9,11 @@ mod calib;
 mod canvas;
 mod channels;
 pub mod client;
+mod console;
 pub mod db;
 mod error;
 mod exports;
+mod geometry;
 mod guard;
 mod history;
 mod jobs;
@@ -21,6 +23,7 @@ mod outputs;
 mod preview;
 mod rig;
 mod scenes;
+mod show;
 mod state;
 mod store;
 
@@ -68,6 +71,7 @@ routes! {
     "/v1/rig/revert" => post(history::rig_revert);
     "/v1/rig/undo" => post(history::rig_undo);
     "/v1/rig/redo" => post(history::rig_redo);
+    "/v1/rig/geometry" => get(geometry::geometry);
     "/v1/history" => get(history::list);
     "/v1/channels" => get(rig::channels);
     "/v1/channels/{id}/content" => get(channels::get_content).put(channels::put_content);
@@ -87,6 +91,8 @@ routes! {
     "/v1/channels/{id}/warp.exr" => get(outputs::warp);
     "/v1/channels/{id}/blend.png" => get(outputs::blend);
     "/v1/channels/{id}/render" => get(outputs::render);
+    "/v1/channels/{id}/show" => get(show::get_show).put(show::put_show);
+    "/v1/channels/{id}/output.png" => get(show::output);
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
     "/v1/meshes" => get(meshes::list);
@@ -98,6 +104,7 @@ pub fn router(state: Arc<AppState>) -> Router {
     // Layers run outside in: JSON errors, then the guard (Host, Origin, sizes, the body), then
     // the token, then the route.
     table()
+        .merge(console::routes())
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .method_not_allowed_fallback(|| async {
             ApiError::refused(
@@ -121,7 +128,9 @@ async fn auth(
     req: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
-    if let Some(token) = &state.options.token {
+    if let Some(token) = &state.options.token
+        && !console::is_asset(req.method(), req.uri().path())
+    {
         let given = req
             .headers()
             .get(AUTHORIZATION)

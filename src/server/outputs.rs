@@ -134,7 +134,7 @@ pub async fn blend(
     file(&s, bytes, "image/png", &j.etag())
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct RenderQuery {
     /// `png` (8-bit sRGB-ish, blend applied in signal space) or `exr` (linear f32).
@@ -167,6 +167,16 @@ pub struct RenderQuery {
     /// For `ppp` and `auto`: the largest sampling error allowed (`0.25px`, `0.05deg`).
     #[serde(default)]
     tolerance: Option<String>,
+}
+
+impl RenderQuery {
+    /// The default preview at `scale`: what a channel showing its content puts out.
+    pub(super) fn at_scale(scale: u32) -> RenderQuery {
+        RenderQuery {
+            scale: Some(scale),
+            ..RenderQuery::default()
+        }
+    }
 }
 
 /// A preview of `ow` × `oh` pixels is within [`MAX_PREVIEW`].

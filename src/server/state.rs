@@ -8,6 +8,7 @@ use super::ApiError;
 use super::cache::{Computed, Geometry, GpuWarp};
 use super::db::Meta;
 use super::store::Store;
+use crate::content::testcard::Card;
 use axum::Json;
 use axum::body::Bytes;
 use axum::http::{HeaderMap, HeaderValue, header};
@@ -89,6 +90,8 @@ pub struct AppState {
     pub scene_previews: super::scenes::ScenePreviews,
     /// Writes computed warps to disk after the requests that computed them.
     pub keeper: super::keep::Keeper,
+    /// What each channel shows: its content or a test card.
+    pub shows: Shows,
 }
 
 impl AppState {
@@ -120,6 +123,7 @@ impl AppState {
             previews: Default::default(),
             scene_previews: Default::default(),
             keeper: Default::default(),
+            shows: Default::default(),
         })
     }
 
@@ -131,6 +135,30 @@ impl AppState {
     pub fn announce(&self, change: serde_json::Value) {
         // Nobody listening is fine.
         let _ = self.events.send(change.to_string());
+    }
+}
+
+/// What each channel shows (`show.rs`): per channel id, the revision of the choice and the test
+/// card shown (`None`: its content). In memory only: a test card is for the minutes of an
+/// alignment, and after a restart every channel shows its content again.
+#[derive(Default)]
+pub struct Shows(Mutex<HashMap<String, (u64, Option<Card>)>>);
+
+impl Shows {
+    pub fn get(&self, id: &str) -> (u64, Option<Card>) {
+        let map = self.0.lock().expect("shows lock");
+        map.get(id).copied().unwrap_or((1, None))
+    }
+
+    /// Shows `card` on channel `id` if `wanted` is the current revision; the new revision.
+    pub fn set(&self, id: &str, wanted: u64, card: Option<Card>) -> Result<u64, ApiError> {
+        let mut map = self.0.lock().expect("shows lock");
+        let entry = map.entry(id.to_string()).or_insert((1, None));
+        if entry.0 != wanted {
+            return Err(ApiError::Stale { current: entry.0 });
+        }
+        *entry = (entry.0 + 1, card);
+        Ok(entry.0)
     }
 }
 

@@ -82,6 +82,13 @@ pub struct Proposal {
     pub considered: Vec<serde_json::Value>,
     pub sigma: Vec<(String, f64)>,
     pub warnings: Vec<String>,
+    /// Reprojection error of every point in the order sent, pixels (absent from proposals kept
+    /// before it was reported).
+    #[serde(default)]
+    pub residuals: Vec<f64>,
+    /// The points whose residual exceeds 3 robust σ, by index.
+    #[serde(default)]
+    pub outliers: Vec<usize>,
 }
 
 pub struct Store {

@@ -1,0 +1,376 @@
+// The panels beside a channel's preview: its content canvas (fields and an aiming pad), the
+// test cards it can be sent, calibration from uploaded correspondences, exports, and the
+// history. Each reads and writes through /v1 only.
+
+import { ApiError } from './api.js';
+import { parseCorrespondences } from './tiles.js';
+
+const $ = (sel) => document.querySelector(sel);
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  e.append(...children);
+  return e;
+}
+
+const vec = (text) => text.split(/[ ,]+/).filter(Boolean).map(Number);
+const fmt = (v) => (Array.isArray(v) ? v.map((x) => +x.toFixed(6)).join(', ') : '');
+
+// The content canvas: projection, field of view, orientation, off-axis vector, zoom, size and
+// the point a panorama is projected from. The aiming pad shows look_to as azimuth (across) and
+// elevation (up); dragging it turns the content, the wheel or a pinch zooms.
+export class ContentPanel {
+  constructor(app) {
+    this.app = app;
+    this.revision = null;
+    this.canvas = null;
+    this.form = $('#content-form');
+    this.form.addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.save();
+    });
+    $('#content-undo').addEventListener('click', () => this.history('undo'));
+    $('#content-redo').addEventListener('click', () => this.history('redo'));
+    const pad = $('#aim-pad');
+    this.pad = pad;
+    this.pointers = new Map();
+    pad.addEventListener('pointerdown', (e) => {
+      pad.setPointerCapture(e.pointerId);
+      this.pointers.set(e.pointerId, [e.clientX, e.clientY]);
+      if (this.pointers.size === 1) this.aim(e);
+    });
+    pad.addEventListener('pointermove', (e) => {
+      const last = this.pointers.get(e.pointerId);
+      if (!last) return;
+      if (this.pointers.size === 2) {
+        const other = [...this.pointers].find(([k]) => k !== e.pointerId)[1];
+        const before = Math.hypot(last[0] - other[0], last[1] - other[1]);
+        const after = Math.hypot(e.clientX - other[0], e.clientY - other[1]);
+        if (before > 0) this.setZoom(Number(this.form.elements.zoom.value || 1) * (after / before));
+      } else {
+        this.aim(e);
+      }
+      this.pointers.set(e.pointerId, [e.clientX, e.clientY]);
+    });
+    const up = (e) => this.pointers.delete(e.pointerId);
+    pad.addEventListener('pointerup', up);
+    pad.addEventListener('pointercancel', up);
+    pad.addEventListener(
+      'wheel',
+      (e) => {
+        e.preventDefault();
+        this.setZoom(Number(this.form.elements.zoom.value || 1) * Math.exp(-e.deltaY * 0.001));
+      },
+      { passive: false },
+    );
+  }
+
+  setZoom(z) {
+    this.form.elements.zoom.value = +Math.min(1000, Math.max(0.001, z)).toFixed(4);
+  }
+
+  aim(e) {
+    const box = this.pad.getBoundingClientRect();
+    const az = (((e.clientX - box.left) / box.width) * 360 - 180) * (Math.PI / 180);
+    const el = (90 - ((e.clientY - box.top) / box.height) * 180) * (Math.PI / 180);
+    const d = [Math.cos(el) * Math.sin(az), Math.sin(el), -Math.cos(el) * Math.cos(az)];
+    this.form.elements.look_to.value = fmt(d);
+    this.drawPad();
+  }
+
+  drawPad() {
+    const c = this.pad;
+    const ctx = c.getContext('2d');
+    const [w, h] = [c.width, c.height];
+    ctx.fillStyle = '#1b2027';
+    ctx.fillRect(0, 0, w, h);
+    ctx.strokeStyle = '#39424d';
+    for (let k = 1; k < 8; k++) {
+      ctx.beginPath();
+      ctx.moveTo((k * w) / 8, 0);
+      ctx.lineTo((k * w) / 8, h);
+      ctx.stroke();
+    }
+    for (let k = 1; k < 4; k++) {
+      ctx.beginPath();
+      ctx.moveTo(0, (k * h) / 4);
+      ctx.lineTo(w, (k * h) / 4);
+      ctx.stroke();
+    }
+    const d = vec(this.form.elements.look_to.value);
+    if (d.length !== 3) return;
+    const n = Math.hypot(...d) || 1;
+    const az = Math.atan2(d[0], -d[2]);
+    const el = Math.asin(Math.max(-1, Math.min(1, d[1] / n)));
+    const x = ((az / Math.PI) * 180 + 180) / 360 * w;
+    const y = (90 - (el / Math.PI) * 180) / 180 * h;
+    ctx.fillStyle = '#ffd24a';
+    ctx.beginPath();
+    ctx.arc(x, y, 6, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+
+  async load(id) {
+    this.id = id;
+    const { body, revision } = await this.app.api.get(`/v1/channels/${id}/content`);
+    if (id !== this.id) return;
+    this.revision = revision;
+    this.canvas = body.content;
+    const c = body.content;
+    const f = this.form.elements;
+    f.projection.value = c.projection;
+    for (const k of ['hfov', 'vfov', 'fov']) f[k].value = c.params && c.params[k] !== undefined ? c.params[k] : '';
+    f.look_to.value = fmt(c.look_to || [0, 0, -1]);
+    f.look_up.value = fmt(c.look_up || [0, 1, 0]);
+    f.offaxis.value = fmt(c.offaxis || [0, 0, 0]);
+    f.zoom.value = c.zoom === undefined ? 1 : c.zoom;
+    f.width.value = c.size[0];
+    f.height.value = c.size[1];
+    f.project_from.value = fmt(c.project_from || []);
+    $('#content-revision').textContent = `content revision ${revision}`;
+    this.app.rig.content = { look_to: c.look_to || [0, 0, -1], project_from: c.project_from };
+    this.app.rig.draw();
+    this.drawPad();
+  }
+
+  body() {
+    const f = this.form.elements;
+    const params = {};
+    for (const k of ['hfov', 'vfov', 'fov']) if (f[k].value !== '') params[k] = Number(f[k].value);
+    const canvas = {
+      projection: f.projection.value,
+      params,
+      look_to: vec(f.look_to.value),
+      look_up: vec(f.look_up.value),
+      offaxis: vec(f.offaxis.value),
+      zoom: Number(f.zoom.value),
+      size: [Number(f.width.value), Number(f.height.value)],
+    };
+    const from = vec(f.project_from.value);
+    if (from.length) canvas.project_from = from;
+    return canvas;
+  }
+
+  async save(base = this.revision) {
+    const body = this.body();
+    try {
+      const r = await this.app.api.write('PUT', `/v1/channels/${this.id}/content`, body, base);
+      this.app.notify(`content revision ${r.revision}`);
+      this.app.clearConflict();
+      await this.load(this.id);
+    } catch (e) {
+      if (e instanceof ApiError && e.status === 412) {
+        this.app.conflict({
+          what: `the content of ${this.id}`,
+          mine: body,
+          base,
+          current: e.current,
+          reload: () => this.load(this.id),
+          reapply: () => this.save(e.current),
+        });
+      } else {
+        this.app.notify(this.app.describe(e), 'error');
+      }
+    }
+  }
+
+  async history(action) {
+    try {
+      const r = await this.app.api.write('POST', `/v1/channels/${this.id}/content/${action}`, {}, this.revision);
+      this.app.notify(`${action}: content revision ${r.revision}`);
+      await this.load(this.id);
+    } catch (e) {
+      this.app.notify(this.app.describe(e), 'error');
+    }
+  }
+}
+
+// Test cards: what the channel puts out (GET …/output.png) follows what is sent here.
+export class PatternPanel {
+  constructor(app) {
+    this.app = app;
+    this.revision = null;
+    for (const b of document.querySelectorAll('[data-show]')) {
+      b.addEventListener('click', () => this.send(b.dataset.show));
+    }
+  }
+
+  async load(id) {
+    this.id = id;
+    const { body, revision } = await this.app.api.get(`/v1/channels/${id}/show`);
+    if (id !== this.id) return;
+    this.revision = revision;
+    $('#showing').textContent = body.show;
+    for (const b of document.querySelectorAll('[data-show]')) {
+      b.classList.toggle('active', b.dataset.show === body.show);
+    }
+    const img = $('#output');
+    const serial = (this.serial = (this.serial || 0) + 1);
+    const { blob } = await this.app.api.blob(`/v1/channels/${id}/output.png?scale=4`);
+    if (serial !== this.serial) return;
+    const old = img.src;
+    img.src = URL.createObjectURL(blob);
+    img.dataset.show = body.show;
+    if (old.startsWith('blob:')) URL.revokeObjectURL(old);
+  }
+
+  async send(show) {
+    try {
+      await this.app.api.write('PUT', `/v1/channels/${this.id}/show`, { show }, this.revision);
+    } catch (e) {
+      if (!(e instanceof ApiError && e.status === 412)) {
+        this.app.notify(this.app.describe(e), 'error');
+        return;
+      }
+      // Last choice wins for a test card: nothing is lost by sending it again.
+      await this.app.api.write('PUT', `/v1/channels/${this.id}/show`, { show }, e.current);
+    }
+    this.app.notify(`${this.id} shows ${show}`);
+    await this.load(this.id);
+  }
+}
+
+// Calibration: a correspondences file in, a proposal out (residual per point, warnings), and
+// the proposal applied to the rig.
+export class CalibrationPanel {
+  constructor(app) {
+    this.app = app;
+    this.proposal = null;
+    $('#calib-form').addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.solve();
+    });
+    $('#calib-apply').addEventListener('click', () => this.apply());
+  }
+
+  async solve() {
+    const file = $('#calib-file').files[0];
+    if (!file) {
+      this.app.notify('choose a CSV or JSON file of correspondences', 'warn');
+      return;
+    }
+    const out = $('#calib-result');
+    let doc;
+    try {
+      doc = parseCorrespondences(await file.text(), file.name, this.app.channelSize());
+    } catch (e) {
+      out.replaceChildren(el('p', { class: 'error' }, e.message));
+      return;
+    }
+    const model = $('#calib-model').value;
+    if (model !== 'auto' && !doc.model) doc.model = model;
+    out.replaceChildren(el('p', {}, `solving from ${doc.points.length} points…`));
+    try {
+      const { body } = await this.app.api.write('POST', `/v1/channels/${this.app.channel}/calibration`, doc);
+      this.show(body, doc);
+    } catch (e) {
+      out.replaceChildren(el('p', { class: 'error' }, this.app.describe(e)));
+    }
+  }
+
+  show(p, doc) {
+    this.proposal = p;
+    const out = $('#calib-result');
+    const considered = el('table', {}, el('tr', {}, el('th', {}, 'model'), el('th', {}, 'rms px'), el('th', {}, 'held out'), el('th', {}, 'verdict')));
+    for (const c of p.considered) {
+      considered.append(
+        el('tr', {}, el('td', {}, c.model), el('td', {}, (+c.rms).toFixed(4)), el('td', {}, c.held_out_rms === null ? '—' : (+c.held_out_rms).toFixed(4)), el('td', {}, c.verdict || '')),
+      );
+    }
+    const worst = Math.max(...p.residuals, 1e-9);
+    const residuals = el('table', { class: 'residuals', id: 'calib-residuals' }, el('tr', {}, el('th', {}, '#'), el('th', {}, 'pixel'), el('th', {}, 'residual px'), el('th', {}, '')));
+    p.residuals.forEach((r, k) => {
+      const bar = el('span', { class: 'bar' });
+      bar.style.width = `${(100 * r) / worst}%`;
+      const row = el('tr', { class: p.outliers.includes(k) ? 'outlier' : '' }, el('td', {}, String(k)), el('td', {}, fmt(doc.points[k].pixel)), el('td', {}, r.toFixed(4)), el('td', {}, bar));
+      residuals.append(row);
+    });
+    const warnings = el('ul', { class: 'warnings' }, ...p.warnings.map((w) => el('li', {}, w)));
+    out.replaceChildren(
+      el('p', { id: 'calib-summary' }, `proposal ${p.id}: ${p.proposed.lens.model}, rms ${p.rms.toFixed(4)} px over ${p.residuals.length} points, ${p.outliers.length} outliers (measured against rig revision ${p.rig_revision})`),
+      warnings,
+      considered,
+      residuals,
+    );
+    $('#calib-apply').hidden = false;
+  }
+
+  async apply() {
+    if (!this.proposal) return;
+    try {
+      const r = await this.app.api.write('POST', `/v1/proposals/${this.proposal.id}/apply`, undefined, this.app.rigRevision);
+      this.app.notify(`proposal ${this.proposal.id} applied: rig revision ${r.revision}`);
+      $('#calib-apply').hidden = true;
+    } catch (e) {
+      this.app.notify(this.app.describe(e), 'error');
+    }
+  }
+}
+
+// Exports: each file of the channel and the rig's MPCDI package, with the grid and error the
+// daemon reports, saved through a download link.
+export class ExportPanel {
+  constructor(app) {
+    this.app = app;
+    for (const b of document.querySelectorAll('[data-export]')) {
+      b.addEventListener('click', () => this.channelFile(b.dataset.export));
+    }
+    $('#mpcdi-form').addEventListener('submit', (e) => {
+      e.preventDefault();
+      this.mpcdi();
+    });
+  }
+
+  async fetchFile(url, name) {
+    const log = $('#export-log');
+    const line = el('li', {}, `${name}: working…`);
+    log.prepend(line);
+    try {
+      const { blob, headers } = await this.app.api.blob(url);
+      const grid = headers.get('X-Omniwarp-Grid');
+      const error = headers.get('X-Omniwarp-Max-Error');
+      const href = URL.createObjectURL(blob);
+      const a = el('a', { href, download: name }, name);
+      line.replaceChildren(a, ` — ${(blob.size / 1024).toFixed(0)} KiB${grid ? `, grid ${grid}` : ''}${error ? `, largest error ${error}` : ''}`);
+      a.click();
+    } catch (e) {
+      line.replaceChildren(`${name}: ${this.app.describe(e)}`);
+      line.className = 'error';
+    }
+  }
+
+  channelFile(file) {
+    const q = new URLSearchParams();
+    const tol = $('#export-tolerance').value;
+    if (tol !== '') q.set('tolerance', tol);
+    if (file === 'mesh.data') q.set('reader', $('#export-reader').value);
+    const id = this.app.channel;
+    this.fetchFile(`/v1/channels/${id}/exports/${file}?${q}`, `${id}-${file}`);
+  }
+
+  mpcdi() {
+    const f = $('#mpcdi-form').elements;
+    const q = new URLSearchParams({ profile: f.profile.value, reader: f.reader.value, alpha_bits: f.alpha_bits.value });
+    if (f.version.value) q.set('version', f.version.value);
+    if (f.tolerance.value !== '') q.set('tolerance', f.tolerance.value);
+    this.fetchFile(`/v1/export.mpcdi?${q}`, 'rig.mpcdi');
+  }
+}
+
+// The history of every acknowledged write, newest first.
+export class HistoryPanel {
+  constructor(app) {
+    this.app = app;
+  }
+
+  async load() {
+    const { body } = await this.app.api.get('/v1/history?limit=40');
+    const list = $('#history');
+    list.replaceChildren(
+      ...body.history.map((h) =>
+        el('li', {}, `${new Date(h.at_ms).toLocaleTimeString()} ${h.who}: ${h.action} ${h.resource} → ${h.revision}`),
+      ),
+    );
+  }
+}

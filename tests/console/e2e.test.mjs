@@ -1,0 +1,316 @@
+// The console end to end: Debian's Chromium, driven by playwright-core, against the real daemon
+// on port 0 with a fresh data directory. Each step leaves a screenshot of every page under
+// target/console-e2e/ when it fails. Run by scripts/console-test (which installs Chromium and
+// playwright-core); OMNIWARP_BIN names the binary (default target/release/omniwarp).
+
+import assert from 'node:assert/strict';
+import { spawn, execFileSync } from 'node:child_process';
+import { mkdtempSync, mkdirSync, readFileSync, writeFileSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { dirname, join, resolve } from 'node:path';
+import { after, before, test } from 'node:test';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+
+const root = resolve(dirname(fileURLToPath(import.meta.url)), '../..');
+const bin = process.env.OMNIWARP_BIN || join(root, 'target/release/omniwarp');
+const shots = join(root, 'target/console-e2e');
+const chromiumPath = process.env.CHROMIUM || '/usr/bin/chromium';
+// What a headless Chromium needs on a machine with no GPU and a closed network.
+const chromiumArgs = [
+  '--no-sandbox',
+  '--disable-gpu',
+  '--disable-quic',
+  '--no-first-run',
+  '--disable-background-networking',
+  '--disable-component-update',
+  '--disable-sync',
+];
+
+// Starts the daemon on port 0 and resolves with its base address once it listens.
+function daemon(args) {
+  const child = spawn(bin, ['serve', '--bind', '127.0.0.1:0', ...args], { stdio: ['ignore', 'pipe', 'pipe'] });
+  let log = '';
+  child.stderr.on('data', (d) => (log += d));
+  const base = new Promise((ok, fail) => {
+    let out = '';
+    child.stdout.on('data', (d) => {
+      out += d;
+      const m = /listening on (http:\/\/[\d.:]+)/.exec(out);
+      if (m) ok(m[1]);
+    });
+    child.on('exit', (code) => fail(new Error(`the daemon exited (${code}): ${log}`)));
+  });
+  return { child, base };
+}
+
+let work, data, server, base, browser, a, b;
+const pages = [];
+
+async function open(context) {
+  const page = await context.newPage();
+  page.on('pageerror', (e) => console.error(`page error: ${e.message}`));
+  pages.push(page);
+  await page.goto(`${base}/`);
+  await page.waitForSelector('#channels li >> nth=2');
+  await page.waitForFunction(() => document.querySelector('#feed-state').textContent === 'live');
+  return page;
+}
+
+// A step of the scenario: on failure, a screenshot of every page open, named after the step.
+async function step(name, fn) {
+  try {
+    await fn();
+  } catch (e) {
+    mkdirSync(shots, { recursive: true });
+    await Promise.all(
+      pages.map((p, k) => p.screenshot({ path: join(shots, `${name}-${k}.png`), fullPage: true }).catch(() => {})),
+    );
+    throw e;
+  }
+}
+
+async function api(path, init) {
+  const resp = await fetch(`${base}${path}`, init);
+  assert.ok(resp.ok, `${path}: ${resp.status} ${await resp.clone().text()}`);
+  return resp.json();
+}
+
+async function feature(channel, column, row, revision) {
+  const q = revision ? `?revision=${revision}` : '';
+  const { tiles } = await api(`/v1/channels/${channel}/tiles${q}`);
+  return tiles.layout.features[row * tiles.layout.columns + column];
+}
+
+function revisionOnDisk(resource) {
+  const script = 'import sqlite3,sys;c=sqlite3.connect(sys.argv[1]);print(c.execute("select revision from resources where name=?",(sys.argv[2],)).fetchone()[0])';
+  return Number(execFileSync('python3', ['-c', script, join(data, 'omniwarp.db'), resource]).toString().trim());
+}
+
+async function handle(page, column, row) {
+  const box = await page.locator(`#overlay circle[data-column="${column}"][data-row="${row}"]`).boundingBox();
+  assert.ok(box, `feature ${column}, ${row} has a handle`);
+  return [box.x + box.width / 2, box.y + box.height / 2];
+}
+
+async function drag(page, column, row, dx, dy) {
+  const [x, y] = await handle(page, column, row);
+  await page.mouse.move(x, y);
+  await page.mouse.down();
+  await page.mouse.move(x + dx / 2, y + dy / 2, { steps: 4 });
+  await page.mouse.move(x + dx, y + dy, { steps: 4 });
+  await page.mouse.up();
+}
+
+// Waits for a console to show tile revision n: a client's own edit may queue for a worker, so
+// it gets 10 s; another client's edit must arrive within a second or so (`seen`).
+const tilesRevision = (page, n, timeout = 10000) =>
+  page.waitForFunction((n) => document.querySelector('#tiles-revision').textContent.startsWith(`tiles revision ${n}`), n, { timeout });
+const seen = (page, n) => tilesRevision(page, n, 1500);
+
+async function selectChannel(page, id) {
+  await page.click(`#channels li[data-channel="${id}"] button`);
+  await page.waitForFunction((id) => document.querySelector('#channel-title').textContent === id, id);
+  await page.waitForSelector('#overlay circle');
+}
+
+before(async () => {
+  work = mkdtempSync(join(tmpdir(), 'omniwarp-console-'));
+  data = join(work, 'data');
+  server = daemon(['--demo', '--data', data]);
+  base = await server.base;
+  browser = await chromium.launch({ executablePath: chromiumPath, args: chromiumArgs });
+  a = await browser.newContext({ viewport: { width: 1280, height: 900 }, acceptDownloads: true });
+  b = await browser.newContext({ viewport: { width: 1280, height: 900 } });
+});
+
+after(async () => {
+  if (browser) await browser.close();
+  if (server) server.child.kill();
+  rmSync(work, { recursive: true, force: true });
+});
+
+let pageA, pageB;
+
+test('the console loads: channels, the rig in 3D, the feed live, a preview', async () => {
+  await step('load', async () => {
+    pageA = await open(a);
+    assert.equal(await pageA.locator('#channels li').count(), 3);
+    await pageA.waitForSelector('#preview[data-etag]');
+    await pageA.click('[data-tab=overview]');
+    // The rig view drew something besides its background.
+    const drawn = await pageA.evaluate(() => {
+      const c = document.querySelector('#rig3d');
+      const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+      let lit = 0;
+      for (let k = 0; k < px.length; k += 4) if (px[k] + px[k + 1] + px[k + 2] > 150) lit++;
+      return lit;
+    });
+    assert.ok(drawn > 500, `${drawn} pixels of the rig drawn`);
+    await pageA.click('[data-tab=channel]');
+  });
+});
+
+test('dragging a feature changes the preview and the tile revision on disk', async () => {
+  await step('drag', async () => {
+    await selectChannel(pageA, 'centre');
+    await pageA.waitForSelector('#preview[data-etag]');
+    const etag = await pageA.getAttribute('#preview', 'data-etag');
+    const beforeShot = await pageA.locator('#preview').screenshot();
+    const was = await feature('centre', 16, 9);
+    await drag(pageA, 16, 9, 15, 0);
+    await tilesRevision(pageA, 2);
+    await pageA.waitForFunction((e) => document.querySelector('#preview').dataset.etag !== e, etag);
+    const afterShot = await pageA.locator('#preview').screenshot();
+    assert.notEqual(Buffer.compare(beforeShot, afterShot), 0, 'the preview changed');
+    const now = await feature('centre', 16, 9);
+    // Dragged right: the feature now shows what was to its left.
+    assert.ok(now.phi < was.phi - 0.5, `phi ${was.phi} → ${now.phi}`);
+    assert.equal(revisionOnDisk('channels/centre/tiles'), 2);
+  });
+});
+
+test('two technicians: a conflict is shown and resolved, no acknowledged edit lost', async () => {
+  await step('conflict', async () => {
+    pageB = await open(b);
+    await selectChannel(pageB, 'centre');
+    // B opens the feature's form at revision 2 …
+    await pageB.click(`#overlay circle[data-column="16"][data-row="9"]`);
+    await pageB.waitForSelector('#feature-form:not([hidden])');
+    // … A moves the same feature (revision 3), and B sees it within a second.
+    await drag(pageA, 16, 9, 0, 12);
+    await tilesRevision(pageA, 3);
+    await seen(pageB, 3);
+    const fromA = await feature('centre', 16, 9, 3);
+    await pageB.fill('#feature-form input[name=phi]', '-3.5');
+    await pageB.click('#feature-form button[type=submit]');
+    await pageB.waitForSelector('#conflict:not([hidden])');
+    assert.match(await pageB.textContent('#conflict-text'), /revision 3 while you edited revision 2/);
+    // Both changed the same feature: the daemon refuses to merge, and says so.
+    await pageB.click('#conflict-merge');
+    await pageB.waitForFunction(() => /could not merge/.test(document.querySelector('#conflict-text').textContent));
+    await pageB.click('#conflict-reapply');
+    await tilesRevision(pageB, 4);
+    await seen(pageA, 4);
+    assert.equal((await feature('centre', 16, 9, 4)).phi, -3.5);
+    assert.deepEqual(await feature('centre', 16, 9, 3), fromA, "A's revision is kept in the history");
+
+    // Edits of different features merge: B at revision 4, A's edit of another feature first.
+    await pageB.click(`#overlay circle[data-column="8"][data-row="6"]`);
+    await drag(pageA, 20, 12, -10, 0);
+    await tilesRevision(pageA, 5);
+    await seen(pageB, 5);
+    const movedByA = await feature('centre', 20, 12, 5);
+    await pageB.fill('#feature-form input[name=theta]', '19.5');
+    await pageB.click('#feature-form button[type=submit]');
+    await pageB.waitForSelector('#conflict-merge:not([hidden])');
+    await pageB.click('#conflict-merge');
+    await tilesRevision(pageB, 6);
+    assert.equal((await feature('centre', 8, 6)).theta, 19.5);
+    assert.deepEqual(await feature('centre', 20, 12), movedByA, "A's edit survives the merge");
+  });
+});
+
+test('undo and redo through the history routes', async () => {
+  await step('undo', async () => {
+    const five = await feature('centre', 8, 6, 5);
+    const six = await feature('centre', 8, 6, 6);
+    await tilesRevision(pageA, 6);
+    await pageA.click('#tiles-undo');
+    await tilesRevision(pageA, 7);
+    assert.deepEqual(await feature('centre', 8, 6), five);
+    await pageA.click('#tiles-redo');
+    await tilesRevision(pageA, 8);
+    assert.deepEqual(await feature('centre', 8, 6), six);
+    await pageA.waitForFunction(() => /redo channels\/centre\/tiles → 8/.test(document.querySelector('#history').textContent));
+  });
+});
+
+test('a test card sent to a channel is what it puts out, seen by every console', async () => {
+  await step('pattern', async () => {
+    await pageA.click('[data-show=grid]');
+    await pageA.waitForSelector('#output[data-show=grid]');
+    assert.equal((await api('/v1/channels/centre/show')).show, 'grid');
+    await pageB.waitForFunction(() => document.querySelector('#showing').textContent === 'grid', null, { timeout: 1500 });
+    const png = await (await fetch(`${base}/v1/channels/centre/output.png?scale=8`)).arrayBuffer();
+    assert.equal(Buffer.from(png).subarray(1, 4).toString(), 'PNG');
+  });
+});
+
+test('calibration from an uploaded CSV: residuals per point, applied to the rig', async () => {
+  await step('calibration', async () => {
+    const doc = JSON.parse(readFileSync(join(root, 'calibration/examples/points.json'), 'utf8'));
+    const csv = ['pixel_x,pixel_y,x,y,z', ...doc.points.map((p) => [...p.pixel, ...p.world].join(','))].join('\n');
+    const file = join(work, 'points.csv');
+    writeFileSync(file, csv);
+    await selectChannel(pageA, 'left');
+    await pageA.click('[data-tab=calibration]');
+    await pageA.setInputFiles('#calib-file', file);
+    await pageA.click('#calib-form button[type=submit]');
+    await pageA.waitForSelector('#calib-summary', { timeout: 60000 });
+    const rows = await pageA.locator('#calib-residuals tr').count();
+    assert.equal(rows - 1, doc.points.length);
+    await pageA.click('#calib-apply');
+    await pageA.waitForFunction(() => document.querySelector('#rig-revision').textContent === 'rig revision 2');
+    assert.equal((await api('/v1/rig')).revision, 2);
+  });
+});
+
+test('the MPCDI package downloads', async () => {
+  await step('mpcdi', async () => {
+    await pageA.click('[data-tab=exports]');
+    const [download] = await Promise.all([
+      pageA.waitForEvent('download', { timeout: 120000 }),
+      pageA.click('#mpcdi-download'),
+    ]);
+    const zip = readFileSync(await download.path());
+    assert.equal(zip.subarray(0, 2).toString(), 'PK');
+    assert.ok(zip.includes('mpcdi.xml'), 'the package holds mpcdi.xml');
+    assert.match(await pageA.textContent('#export-log'), /rig\.mpcdi — \d+ KiB/);
+  });
+});
+
+test('a tablet with the token: asked for it, then a touch drag edits a channel', async () => {
+  const tokenFile = join(work, 'token');
+  writeFileSync(tokenFile, 'tablet-secret-123\n');
+  const guarded = daemon(['--demo', '--token-file', tokenFile]);
+  const guardedBase = await guarded.base;
+  const tablet = await browser.newContext({ viewport: { width: 820, height: 1180 }, hasTouch: true, isMobile: true });
+  const page = await tablet.newPage();
+  pages.push(page);
+  try {
+    await step('tablet', async () => {
+      await page.goto(`${guardedBase}/`);
+      await page.waitForSelector('#token-dialog:not([hidden])');
+      await page.fill('#token', 'tablet-secret-123');
+      await page.click('#token-form button');
+      await page.waitForSelector('#channels li >> nth=2');
+      await page.waitForFunction(() => document.querySelector('#feed-state').textContent === 'live');
+      await page.waitForSelector('#overlay circle');
+      const box = await page.locator('#overlay circle[data-column="16"][data-row="9"]').boundingBox();
+      const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
+      const cdp = await tablet.newCDPSession(page);
+      const touch = (type, px, py) =>
+        cdp.send('Input.dispatchTouchEvent', { type, touchPoints: type === 'touchEnd' ? [] : [{ x: px, y: py }] });
+      await touch('touchStart', x, y);
+      for (let k = 1; k <= 5; k++) await touch('touchMove', x + 2 * k, y);
+      await touch('touchEnd');
+      await tilesRevision(page, 2);
+      // Two fingers apart: the preview zooms.
+      await touch('touchStart', x, y);
+      await cdp.send('Input.dispatchTouchEvent', { type: 'touchStart', touchPoints: [{ x, y, id: 0 }, { x: x + 40, y, id: 1 }] });
+      for (let k = 1; k <= 5; k++) {
+        await cdp.send('Input.dispatchTouchEvent', { type: 'touchMove', touchPoints: [{ x: x - 10 * k, y, id: 0 }, { x: x + 40 + 10 * k, y, id: 1 }] });
+      }
+      await touch('touchEnd');
+      const width = await page.evaluate(() => document.querySelector('#zoomer').style.width);
+      assert.ok(Number.parseFloat(width) > 150, `zoomed to ${width}`);
+      const resp = await fetch(`${guardedBase}/v1/channels/left/tiles`, {
+        headers: { Authorization: 'Bearer tablet-secret-123' },
+      });
+      assert.equal(resp.headers.get('etag'), '"2"');
+    });
+  } finally {
+    guarded.child.kill();
+  }
+});
