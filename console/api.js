@@ -21,6 +21,7 @@ export function revisionOf(etag) {
 }
 
 // How often a request the daemon is too busy for is tried again (about a minute in all).
+// onBusy(path) is told of each wait, and onBusy(null) when the request went through.
 const BUSY_RETRIES = 60;
 
 export class Api {
@@ -50,7 +51,10 @@ export class Api {
         body: body === undefined ? undefined : JSON.stringify(body),
         cache: 'no-store',
       });
-      if (resp.status !== 503 || attempt >= BUSY_RETRIES) break;
+      if (resp.status !== 503 || attempt >= BUSY_RETRIES) {
+        if (attempt > 0) this.onBusy(null);
+        break;
+      }
       const wait = Math.min(5, Number(resp.headers.get('Retry-After')) || 1);
       this.onBusy(path);
       await new Promise((r) => setTimeout(r, wait * 1000 * (0.5 + Math.random() / 2)));

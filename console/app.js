@@ -19,7 +19,11 @@ class App {
       history.replaceState(null, '', location.pathname);
     }
     this.api = new Api(sessionStorage.getItem('omniwarp-token') || '');
-    this.api.onBusy = () => this.notify('the daemon is busy with other work; asking again…', 'warn');
+    const busy = 'the daemon is busy with other work; asking again…';
+    this.api.onBusy = (path) => {
+      if (path) this.notify(busy, 'warn');
+      else if ($('#notice').textContent === busy) this.notify('');
+    };
     this.channels = [];
     this.channel = null;
     this.rigRevision = null;

@@ -21,6 +21,7 @@ export class ChannelView {
     this.previewSerial = 0;
     this.zoom = 1;
     this.touches = new Map();
+    this.queue = Promise.resolve();
     this.$ = (sel) => document.querySelector(sel);
     this.stage = this.$('#stage');
     this.overlay = this.$('#overlay');
@@ -48,6 +49,7 @@ export class ChannelView {
       },
       { passive: false },
     );
+    this.$('#band-mode').addEventListener('click', (e) => e.currentTarget.classList.toggle('active'));
     this.$('#zoom-in').addEventListener('click', () => this.setZoom(this.zoom * 1.5));
     this.$('#zoom-out').addEventListener('click', () => this.setZoom(this.zoom / 1.5));
     this.$('#preview-content').addEventListener('change', () => this.loadPreview());
@@ -219,9 +221,12 @@ export class ChannelView {
     const reach = ((e.pointerType === 'touch' ? 28 : 12) * this.size[0]) / box.width;
     const hit = nearest(this.tiles, at[0], at[1], this.size[0], this.size[1], reach);
     this.overlay.setPointerCapture(e.pointerId);
-    if (hit) {
+    // Shift (or the Region button, on a touch screen) draws a rectangle that adds the features
+    // inside it to the picks; on a handle otherwise, a press picks and drags it.
+    const band = e.shiftKey || this.$('#band-mode').classList.contains('active');
+    if (hit && !band) {
       const already = this.picks.some((p) => p.column === hit.column && p.row === hit.row);
-      if (e.shiftKey) {
+      if (e.ctrlKey || e.metaKey) {
         this.picks = already
           ? this.picks.filter((p) => p.column !== hit.column || p.row !== hit.row)
           : [...this.picks, hit];
@@ -231,7 +236,7 @@ export class ChannelView {
       this.drag = { start: at, at, d: [0, 0], picks: [...this.picks], base: this.revision, moving: false };
       this.openForm(hit);
     } else {
-      this.drag = { start: at, at, band: true };
+      this.drag = { start: at, at, band: true, add: e.shiftKey || e.ctrlKey || e.metaKey };
     }
     this.draw();
   }
@@ -253,14 +258,26 @@ export class ChannelView {
     this.drag = null;
     if (!drag) return;
     if (drag.band) {
-      this.picks = inRect(this.tiles, drag.start, drag.at, this.size[0], this.size[1]);
+      const inside = inRect(this.tiles, drag.start, drag.at, this.size[0], this.size[1]);
+      const had = drag.add ? this.picks : [];
+      const fresh = inside.filter((p) => !had.some((q) => q.column === p.column && q.row === p.row));
+      this.picks = [...had, ...fresh];
+      this.$('#band-mode').classList.remove('active');
       this.draw();
       this.app.notify(`${this.picks.length} features selected`);
       return;
     }
     this.draw();
     if (!drag.moving) return;
-    await this.pull(drag.picks, drag.d, drag.base);
+    await this.enqueue(() => this.pull(drag.picks, drag.d, drag.base));
+  }
+
+  // This console's writes go one after another, so a nudge sent while the last one is in flight
+  // starts from the revision that one made instead of conflicting with it.
+  enqueue(task) {
+    const run = this.queue.then(task, task);
+    this.queue = run.catch(() => {});
+    return run;
   }
 
   async pull(picks, d, base) {
@@ -278,7 +295,8 @@ export class ChannelView {
     const d = { ArrowLeft: [-step, 0], ArrowRight: [step, 0], ArrowUp: [0, -step], ArrowDown: [0, step] }[e.key];
     if (!d) return;
     e.preventDefault();
-    this.pull(this.picks, d, this.revision);
+    const picks = [...this.picks];
+    this.enqueue(() => this.pull(picks, d, this.revision));
   }
 
   // Sends edits made against revision `base`; a conflict is shown, never dropped.

@@ -13,7 +13,7 @@ export class RigView {
     this.selected = null;
     this.yaw = 35;
     this.pitch = 25;
-    this.distance = 9;
+    this.distance = 6.5;
     this.pointers = new Map();
     canvas.addEventListener('pointerdown', (e) => {
       canvas.setPointerCapture(e.pointerId);

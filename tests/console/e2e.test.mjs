@@ -226,6 +226,36 @@ test('undo and redo through the history routes', async () => {
   });
 });
 
+test('a region picked by rectangle moves as one; rapid keyboard nudges queue, not conflict', async () => {
+  await step('region', async () => {
+    const [x0, y0] = await handle(pageA, 10, 8);
+    const [x1, y1] = await handle(pageA, 12, 10);
+    // The Region button (a touch screen's Shift): the rectangle replaces the picks …
+    await pageA.click('#band-mode');
+    await pageA.mouse.move(x0 - 4, y0 - 4);
+    await pageA.mouse.down();
+    await pageA.mouse.move(x1 + 4, y1 + 4, { steps: 4 });
+    await pageA.mouse.up();
+    assert.equal(await pageA.locator('#overlay circle.picked').count(), 9);
+    // … and Shift-drag adds to them.
+    const [x2, y2] = await handle(pageA, 14, 8);
+    await pageA.keyboard.down('Shift');
+    await pageA.mouse.move(x2 - 4, y2 - 4);
+    await pageA.mouse.down();
+    await pageA.mouse.move(x2 + 4, y2 + 4, { steps: 2 });
+    await pageA.mouse.up();
+    await pageA.keyboard.up('Shift');
+    assert.equal(await pageA.locator('#overlay circle.picked').count(), 10);
+    const eight = await api('/v1/channels/centre/tiles?revision=8');
+    for (let k = 0; k < 3; k++) await pageA.keyboard.press('ArrowLeft');
+    await tilesRevision(pageA, 11);
+    assert.ok(await pageA.locator('#conflict').isHidden(), 'no conflict with its own nudges');
+    const nine = await api('/v1/channels/centre/tiles?revision=9');
+    const changed = eight.tiles.layout.features.filter((f, k) => f.phi !== nine.tiles.layout.features[k].phi);
+    assert.equal(changed.length, 10, 'the first nudge moved the ten picked features');
+  });
+});
+
 test('a test card sent to a channel is what it puts out, seen by every console', async () => {
   await step('pattern', async () => {
     await pageA.click('[data-show=grid]');
