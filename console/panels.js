@@ -358,7 +358,8 @@ export class ExportPanel {
   }
 }
 
-// The history of every acknowledged write, newest first.
+// The history of every acknowledged write, newest first. An entry of the rig, a content canvas
+// or a tile screen can be made current again (a revert: a new revision, nothing rewritten).
 export class HistoryPanel {
   constructor(app) {
     this.app = app;
@@ -368,9 +369,28 @@ export class HistoryPanel {
     const { body } = await this.app.api.get('/v1/history?limit=40');
     const list = $('#history');
     list.replaceChildren(
-      ...body.history.map((h) =>
-        el('li', {}, `${new Date(h.at_ms).toLocaleTimeString()} ${h.who}: ${h.action} ${h.resource} → ${h.revision}`),
-      ),
+      ...body.history.map((h) => {
+        const li = el('li', {}, `${new Date(h.at_ms).toLocaleTimeString()} ${h.who}: ${h.action} ${h.resource} → ${h.revision} `);
+        if (/^(rig|channels\/[^/]+\/(content|tiles))$/.test(h.resource)) {
+          const back = el('button', { class: 'revert', title: `make revision ${h.revision} of ${h.resource} current again` }, 'revert');
+          back.dataset.resource = h.resource;
+          back.dataset.revision = h.revision;
+          back.addEventListener('click', () => this.revert(h.resource, h.revision));
+          li.append(back);
+        }
+        return li;
+      }),
     );
+  }
+
+  async revert(resource, revision) {
+    const path = `/v1/${resource}`;
+    try {
+      const { revision: current } = await this.app.api.get(path);
+      const r = await this.app.api.write('POST', `${path}/revert`, { revision }, current);
+      this.app.notify(`${resource}: revision ${revision} made current as revision ${r.revision}`);
+    } catch (e) {
+      this.app.notify(this.app.describe(e), 'error');
+    }
   }
 }

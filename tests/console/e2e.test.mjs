@@ -226,7 +226,7 @@ test('undo and redo through the history routes', async () => {
   });
 });
 
-test('a region picked by rectangle moves as one; rapid keyboard nudges queue, not conflict', async () => {
+test('a region picked by rectangle moves as one; rapid keyboard nudges queue, not conflict; a revert from the history', async () => {
   await step('region', async () => {
     const [x0, y0] = await handle(pageA, 10, 8);
     const [x1, y1] = await handle(pageA, 12, 10);
@@ -253,6 +253,11 @@ test('a region picked by rectangle moves as one; rapid keyboard nudges queue, no
     const nine = await api('/v1/channels/centre/tiles?revision=9');
     const changed = eight.tiles.layout.features.filter((f, k) => f.phi !== nine.tiles.layout.features[k].phi);
     assert.equal(changed.length, 10, 'the first nudge moved the ten picked features');
+    // Any revision in the history can be made current again.
+    await pageA.click('#history button.revert[data-resource="channels/centre/tiles"][data-revision="2"]');
+    await tilesRevision(pageA, 12);
+    const two = await api('/v1/channels/centre/tiles?revision=2');
+    assert.deepEqual((await api('/v1/channels/centre/tiles')).tiles.layout, two.tiles.layout);
   });
 });
 
