@@ -3,7 +3,7 @@
 // what happens when someone else changed the tiles first.
 
 import { ApiError } from './api.js';
-import { grid, inRect, nearest, pullEdits, span, usable } from './tiles.js';
+import { grid, inRect, nearest, pinchRatio, pullEdits, span, usable } from './tiles.js';
 
 const SVG = 'http://www.w3.org/2000/svg';
 
@@ -195,12 +195,9 @@ export class ChannelView {
   // Two fingers on the preview zoom it (the page's own pinch is off over the grid, so that
   // one finger drags features).
   pinch(e) {
-    const last = this.touches.get(e.pointerId);
-    if (!last || this.touches.size !== 2) return false;
-    const other = [...this.touches].find(([k]) => k !== e.pointerId)[1];
-    const before = Math.hypot(last[0] - other[0], last[1] - other[1]);
-    const after = Math.hypot(e.clientX - other[0], e.clientY - other[1]);
-    if (before > 0) this.setZoom((this.zoom * after) / before);
+    const spread = pinchRatio(this.touches, e.pointerId, e.clientX, e.clientY);
+    if (spread === null) return false;
+    this.setZoom(this.zoom * spread);
     this.touches.set(e.pointerId, [e.clientX, e.clientY]);
     return true;
   }

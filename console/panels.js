@@ -3,7 +3,7 @@
 // history. Each reads and writes through /v1 only.
 
 import { ApiError } from './api.js';
-import { parseCorrespondences } from './tiles.js';
+import { parseCorrespondences, pinchRatio } from './tiles.js';
 
 const $ = (sel) => document.querySelector(sel);
 
@@ -43,14 +43,9 @@ export class ContentPanel {
     pad.addEventListener('pointermove', (e) => {
       const last = this.pointers.get(e.pointerId);
       if (!last) return;
-      if (this.pointers.size === 2) {
-        const other = [...this.pointers].find(([k]) => k !== e.pointerId)[1];
-        const before = Math.hypot(last[0] - other[0], last[1] - other[1]);
-        const after = Math.hypot(e.clientX - other[0], e.clientY - other[1]);
-        if (before > 0) this.setZoom(Number(this.form.elements.zoom.value || 1) * (after / before));
-      } else {
-        this.aim(e);
-      }
+      const spread = pinchRatio(this.pointers, e.pointerId, e.clientX, e.clientY);
+      if (spread) this.setZoom(Number(this.form.elements.zoom.value || 1) * spread);
+      else if (this.pointers.size === 1) this.aim(e);
       this.pointers.set(e.pointerId, [e.clientX, e.clientY]);
     });
     const up = (e) => this.pointers.delete(e.pointerId);

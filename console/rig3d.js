@@ -3,7 +3,7 @@
 // camera around the eye: drag to turn, wheel or pinch to move closer. A library would add
 // shading we do not need; lines in perspective are all a technician reads here.
 
-import { channelColour } from './tiles.js';
+import { channelColour, pinchRatio } from './tiles.js';
 
 export class RigView {
   constructor(canvas) {
@@ -46,12 +46,9 @@ export class RigView {
     if (this.pointers.size === 1) {
       this.yaw -= (now[0] - last[0]) * 0.4;
       this.pitch = Math.max(-89, Math.min(89, this.pitch + (now[1] - last[1]) * 0.4));
-    } else if (this.pointers.size === 2) {
-      const [a, b] = [...this.pointers.entries()];
-      const other = a[0] === e.pointerId ? b[1] : a[1];
-      const before = Math.hypot(last[0] - other[0], last[1] - other[1]);
-      const after = Math.hypot(now[0] - other[0], now[1] - other[1]);
-      if (before > 0 && after > 0) this.zoom(before / after);
+    } else {
+      const spread = pinchRatio(this.pointers, e.pointerId, now[0], now[1]);
+      if (spread) this.zoom(1 / spread);
     }
     this.pointers.set(e.pointerId, now);
     this.draw();

@@ -160,6 +160,18 @@ export function parseCorrespondences(text, name, resolution) {
   return doc;
 }
 
+// How much a two-finger pinch spread when pointer `id` moved to (x, y): the ratio of the
+// fingers' distance after to before, or null unless exactly two pointers are down. `pointers`
+// maps pointer ids to their last [x, y].
+export function pinchRatio(pointers, id, x, y) {
+  const last = pointers.get(id);
+  if (!last || pointers.size !== 2) return null;
+  const other = [...pointers].find(([k]) => k !== id)[1];
+  const before = Math.hypot(last[0] - other[0], last[1] - other[1]);
+  const after = Math.hypot(x - other[0], y - other[1]);
+  return before > 0 && after > 0 ? after / before : null;
+}
+
 // Whether a change on the feed alters what `channel` shows or how it is edited.
 export function affects(change, channel) {
   if (!change) return false;

@@ -10,6 +10,7 @@ import {
   inRect,
   nearest,
   parseCorrespondences,
+  pinchRatio,
   pullEdits,
   rate,
   span,
@@ -100,4 +101,14 @@ test('channel colours match the daemon ids card and differ between neighbours', 
   // src/content/testcard.rs, channel_colour(0) and (1).
   assert.equal(channelColour(0), 'rgb(200, 40, 40)');
   assert.notEqual(channelColour(1), channelColour(2));
+});
+
+test('a pinch: the ratio of the fingers\' distances, only with two fingers down', () => {
+  const two = new Map([
+    [1, [0, 0]],
+    [2, [100, 0]],
+  ]);
+  assert.equal(pinchRatio(two, 1, -50, 0), 1.5);
+  assert.equal(pinchRatio(new Map([[1, [0, 0]]]), 1, 5, 5), null);
+  assert.equal(pinchRatio(two, 3, 0, 0), null, 'a pointer not down');
 });
