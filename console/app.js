@@ -166,7 +166,7 @@ class App {
         return;
       }
       if (change.channel) this.channelStatus(change.channel);
-      if (['tiles', 'content'].includes(change.kind) || change.kind === 'rig') this.historyPanel.load();
+      if (['tiles', 'content'].includes(change.kind)) this.historyPanel.load();
       if (!affects(change, this.channel)) return;
       if (change.kind === 'tiles' && change.revision !== this.view.revision) {
         await Promise.all([this.view.loadTiles(), this.view.loadPreview()]);

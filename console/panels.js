@@ -317,7 +317,8 @@ export class ExportPanel {
     });
   }
 
-  async fetchFile(url, name) {
+  // `unit`: what the daemon's largest error is measured in for this file.
+  async fetchFile(url, name, unit) {
     const log = $('#export-log');
     const line = el('li', {}, `${name}: working…`);
     log.prepend(line);
@@ -327,7 +328,7 @@ export class ExportPanel {
       const error = headers.get('X-Omniwarp-Max-Error');
       const href = URL.createObjectURL(blob);
       const a = el('a', { href, download: name }, name);
-      line.replaceChildren(a, ` — ${(blob.size / 1024).toFixed(0)} KiB${grid ? `, grid ${grid}` : ''}${error ? `, largest error ${error}` : ''}`);
+      line.replaceChildren(a, ` — ${(blob.size / 1024).toFixed(0)} KiB${grid ? `, grid ${grid}` : ''}${error ? `, largest error ${error} ${unit}` : ''}`);
       a.click();
     } catch (e) {
       line.replaceChildren(`${name}: ${this.app.describe(e)}`);
@@ -341,7 +342,7 @@ export class ExportPanel {
     if (tol !== '') q.set('tolerance', tol);
     if (file === 'mesh.data') q.set('reader', $('#export-reader').value);
     const id = this.app.channel;
-    this.fetchFile(`/v1/channels/${id}/exports/${file}?${q}`, `${id}-${file}`);
+    this.fetchFile(`/v1/channels/${id}/exports/${file}?${q}`, `${id}-${file}`, file === 'warp-a3.pfm' ? 'mm' : 'content px');
   }
 
   mpcdi() {
@@ -349,7 +350,7 @@ export class ExportPanel {
     const q = new URLSearchParams({ profile: f.profile.value, reader: f.reader.value, alpha_bits: f.alpha_bits.value });
     if (f.version.value) q.set('version', f.version.value);
     if (f.tolerance.value !== '') q.set('tolerance', f.tolerance.value);
-    this.fetchFile(`/v1/export.mpcdi?${q}`, 'rig.mpcdi');
+    this.fetchFile(`/v1/export.mpcdi?${q}`, 'rig.mpcdi', f.profile.value === 'a3' ? 'mm' : 'content px');
   }
 }
 
