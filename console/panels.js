@@ -3,7 +3,7 @@
 // history. Each reads and writes through /v1 only.
 
 import { ApiError } from './api.js';
-import { parseCorrespondences, pinchRatio } from './tiles.js';
+import { angles, direction, parseCorrespondences, pinchRatio } from './tiles.js';
 
 const $ = (sel) => document.querySelector(sel);
 
@@ -18,8 +18,14 @@ const vec = (text) => text.split(/[ ,]+/).filter(Boolean).map(Number);
 const fmt = (v) => (Array.isArray(v) ? v.map((x) => +x.toFixed(6)).join(', ') : '');
 
 // The content canvas: projection, field of view, orientation, off-axis vector, zoom, size and
-// the point a panorama is projected from. The aiming pad shows look_to as azimuth (across) and
-// elevation (up); dragging it turns the content, the wheel or a pinch zooms.
+// the point a panorama is projected from, as fields and on two pads. The aiming pad maps
+// azimuth across and elevation up: dragging it turns the content (look_to), or, with "off-axis O"
+// chosen, turns O keeping its length; the wheel or a pinch zooms (or, for O, changes its length,
+// below 1). The centre pad is the wall seen from above with the eye: a press puts the point a
+// panorama is projected from there (at the height in the field, else the eye's).
+const O_DEFAULT = 0.25;
+const O_MAX = 0.95;
+
 export class ContentPanel {
   constructor(app) {
     this.app = app;
@@ -32,6 +38,11 @@ export class ContentPanel {
     });
     $('#content-undo').addEventListener('click', () => this.history('undo'));
     $('#content-redo').addEventListener('click', () => this.history('redo'));
+    $('#centre-clear').addEventListener('click', () => {
+      this.form.elements.project_from.value = '';
+      this.drawCentre();
+    });
+    this.form.addEventListener('input', () => this.drawPads());
     const pad = $('#aim-pad');
     this.pad = pad;
     this.pointers = new Map();
@@ -44,7 +55,7 @@ export class ContentPanel {
       const last = this.pointers.get(e.pointerId);
       if (!last) return;
       const spread = pinchRatio(this.pointers, e.pointerId, e.clientX, e.clientY);
-      if (spread) this.setZoom(Number(this.form.elements.zoom.value || 1) * spread);
+      if (spread) this.scale(spread);
       else if (this.pointers.size === 1) this.aim(e);
       this.pointers.set(e.pointerId, [e.clientX, e.clientY]);
     });
@@ -55,23 +66,57 @@ export class ContentPanel {
       'wheel',
       (e) => {
         e.preventDefault();
-        this.setZoom(Number(this.form.elements.zoom.value || 1) * Math.exp(-e.deltaY * 0.001));
+        this.scale(Math.exp(-e.deltaY * 0.001));
       },
       { passive: false },
     );
+    const centre = $('#centre-pad');
+    centre.addEventListener('pointerdown', (e) => {
+      centre.setPointerCapture(e.pointerId);
+      this.place(e);
+    });
+    centre.addEventListener('pointermove', (e) => {
+      if (centre.hasPointerCapture(e.pointerId)) this.place(e);
+    });
   }
 
-  setZoom(z) {
-    this.form.elements.zoom.value = +Math.min(1000, Math.max(0.001, z)).toFixed(4);
+  target() {
+    return $('#aim-target').value;
+  }
+
+  // The zoom, or the length of O, by a factor.
+  scale(factor) {
+    const f = this.form.elements;
+    if (this.target() === 'offaxis') {
+      const o = vec(f.offaxis.value);
+      const n = Math.hypot(...o);
+      if (o.length !== 3 || !(n > 0)) return;
+      const length = Math.min(O_MAX, n * factor);
+      f.offaxis.value = fmt(o.map((v) => (v * length) / n));
+    } else {
+      f.zoom.value = +Math.min(1000, Math.max(0.001, Number(f.zoom.value || 1) * factor)).toFixed(4);
+    }
+    this.drawPad();
   }
 
   aim(e) {
     const box = this.pad.getBoundingClientRect();
-    const az = (((e.clientX - box.left) / box.width) * 360 - 180) * (Math.PI / 180);
-    const el = (90 - ((e.clientY - box.top) / box.height) * 180) * (Math.PI / 180);
-    const d = [Math.cos(el) * Math.sin(az), Math.sin(el), -Math.cos(el) * Math.cos(az)];
-    this.form.elements.look_to.value = fmt(d);
+    const az = ((e.clientX - box.left) / box.width) * 360 - 180;
+    const el = 90 - ((e.clientY - box.top) / box.height) * 180;
+    const d = direction(az, el);
+    const f = this.form.elements;
+    if (this.target() === 'offaxis') {
+      const n = Math.hypot(...vec(f.offaxis.value)) || O_DEFAULT;
+      f.offaxis.value = fmt(d.map((v) => v * Math.min(n, O_MAX)));
+    } else {
+      f.look_to.value = fmt(d);
+    }
     this.drawPad();
+  }
+
+  drawPads() {
+    this.drawPad();
+    this.drawCentre();
   }
 
   drawPad() {
@@ -93,17 +138,85 @@ export class ContentPanel {
       ctx.lineTo(w, (k * h) / 4);
       ctx.stroke();
     }
-    const d = vec(this.form.elements.look_to.value);
-    if (d.length !== 3) return;
-    const n = Math.hypot(...d) || 1;
-    const az = Math.atan2(d[0], -d[2]);
-    const el = Math.asin(Math.max(-1, Math.min(1, d[1] / n)));
-    const x = ((az / Math.PI) * 180 + 180) / 360 * w;
-    const y = (90 - (el / Math.PI) * 180) / 180 * h;
-    ctx.fillStyle = '#ffd24a';
+    const at = (v) => {
+      const a = angles(v);
+      return a && [((a[0] + 180) / 360) * w, ((90 - a[1]) / 180) * h];
+    };
+    const f = this.form.elements;
+    const o = vec(f.offaxis.value);
+    const op = o.length === 3 && at(o);
+    if (op) {
+      // O: a ring as large as its length.
+      ctx.strokeStyle = '#4ad3ff';
+      ctx.lineWidth = 2;
+      ctx.beginPath();
+      ctx.arc(op[0], op[1], 4 + 30 * Math.hypot(...o), 0, 2 * Math.PI);
+      ctx.stroke();
+    }
+    const d = vec(f.look_to.value);
+    const p = d.length === 3 && at(d);
+    if (p) {
+      ctx.fillStyle = '#ffd24a';
+      ctx.beginPath();
+      ctx.arc(p[0], p[1], 6, 0, 2 * Math.PI);
+      ctx.fill();
+    }
+  }
+
+  // The centre pad's frame: the wall's extent from above, x across, z down (ahead is up).
+  centreFrame() {
+    const c = $('#centre-pad');
+    const g = this.app.rig.geometry;
+    const points = g ? g.wall.flat() : [];
+    const eye = g ? g.eye : [0, 0, 0];
+    let reach = 1;
+    for (const p of points) reach = Math.max(reach, Math.abs(p[0] - eye[0]), Math.abs(p[2] - eye[2]));
+    const s = (0.45 * Math.min(c.width, c.height)) / reach;
+    return {
+      eye,
+      to: (p) => [c.width / 2 + (p[0] - eye[0]) * s, c.height / 2 + (p[2] - eye[2]) * s],
+      from: (x, y) => [eye[0] + (x - c.width / 2) / s, eye[2] + (y - c.height / 2) / s],
+    };
+  }
+
+  place(e) {
+    const c = $('#centre-pad');
+    const box = c.getBoundingClientRect();
+    const { eye, from } = this.centreFrame();
+    const [x, z] = from(((e.clientX - box.left) / box.width) * c.width, ((e.clientY - box.top) / box.height) * c.height);
+    const old = vec(this.form.elements.project_from.value);
+    const y = old.length === 3 ? old[1] : eye[1];
+    this.form.elements.project_from.value = fmt([x, y, z]);
+    this.drawCentre();
+  }
+
+  drawCentre() {
+    const c = $('#centre-pad');
+    const ctx = c.getContext('2d');
+    ctx.fillStyle = '#1b2027';
+    ctx.fillRect(0, 0, c.width, c.height);
+    const g = this.app.rig.geometry;
+    if (!g) return;
+    const { eye, to } = this.centreFrame();
+    ctx.strokeStyle = 'rgba(170, 180, 190, 0.5)';
+    for (const line of g.wall) {
+      ctx.beginPath();
+      line.forEach((p, k) => (k ? ctx.lineTo(...to(p)) : ctx.moveTo(...to(p))));
+      ctx.stroke();
+    }
+    const [ex, ey] = to(eye);
+    ctx.fillStyle = '#fff';
     ctx.beginPath();
-    ctx.arc(x, y, 6, 0, 2 * Math.PI);
+    ctx.arc(ex, ey, 4, 0, 2 * Math.PI);
     ctx.fill();
+    const from = vec(this.form.elements.project_from.value);
+    if (from.length === 3) {
+      const [x, y] = to(from);
+      ctx.strokeStyle = '#ffd24a';
+      ctx.lineWidth = 2;
+      ctx.strokeRect(x - 6, y - 6, 12, 12);
+      ctx.lineWidth = 1;
+    }
   }
 
   async load(id) {
@@ -126,7 +239,7 @@ export class ContentPanel {
     $('#content-revision').textContent = `content revision ${revision}`;
     this.app.rig.content = { look_to: c.look_to || [0, 0, -1], project_from: c.project_from };
     this.app.rig.draw();
-    this.drawPad();
+    this.drawPads();
   }
 
   body() {

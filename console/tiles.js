@@ -160,6 +160,19 @@ export function parseCorrespondences(text, name, resolution) {
   return doc;
 }
 
+// Unit direction at azimuth `az` (0 ahead, −z; positive to the right, +x) and elevation `el`,
+// degrees, as the daemon's frames have it; and back. `angles` of a zero vector is null.
+export function direction(az, el) {
+  const [a, e] = [(az * Math.PI) / 180, (el * Math.PI) / 180];
+  return [Math.cos(e) * Math.sin(a), Math.sin(e), -Math.cos(e) * Math.cos(a)];
+}
+
+export function angles(v) {
+  const n = Math.hypot(...v);
+  if (!(n > 0)) return null;
+  return [(Math.atan2(v[0], -v[2]) * 180) / Math.PI, (Math.asin(Math.max(-1, Math.min(1, v[1] / n))) * 180) / Math.PI];
+}
+
 // How much a two-finger pinch spread when pointer `id` moved to (x, y): the ratio of the
 // fingers' distance after to before, or null unless exactly two pointers are down. `pointers`
 // maps pointer ids to their last [x, y].

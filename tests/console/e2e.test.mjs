@@ -307,6 +307,33 @@ test('the MPCDI package downloads', async () => {
   });
 });
 
+// After the export: the canvas this leaves (O 45° up) puts the equirect's pole in the centre
+// projector's view, which no 2d grid follows (the MPCDI export is then a 422 saying so).
+test('the content canvas from its pads: turned, O set, projected from a point', async () => {
+  await step('content', async () => {
+    await pageA.click('[data-tab=channel]');
+    await selectChannel(pageA, 'centre');
+    await pageA.click('[data-tab=content]');
+    const pad = await pageA.locator('#aim-pad').boundingBox();
+    // Three quarters across is azimuth +90°, the middle height the horizon.
+    await pageA.mouse.click(pad.x + pad.width * 0.75, pad.y + pad.height / 2);
+    await pageA.selectOption('#aim-target', 'offaxis');
+    await pageA.mouse.click(pad.x + pad.width * 0.5, pad.y + pad.height * 0.25);
+    const centre = await pageA.locator('#centre-pad').boundingBox();
+    // Half a metre to the right of the eye (the pad shows the 2 m cylinder within 0.45 of its side).
+    await pageA.mouse.click(centre.x + centre.width * (0.5 + (0.45 * 0.5) / 2), centre.y + centre.height / 2);
+    await pageA.click('#content-form button[type=submit]');
+    await pageA.waitForFunction(() => document.querySelector('#content-revision').textContent === 'content revision 2');
+    const { content } = await api('/v1/channels/centre/content');
+    const near = (a, b, tol) => a.every((v, k) => Math.abs(v - b[k]) < tol);
+    assert.ok(near(content.look_to, [1, 0, 0], 0.01), `look_to ${content.look_to}`);
+    // Azimuth 0, elevation +45°, O's default length 0.25.
+    assert.ok(near(content.offaxis, [0, 0.177, -0.177], 0.01), `O ${content.offaxis}`);
+    assert.ok(near(content.project_from, [0.5, 0, 0], 0.03), `from ${content.project_from}`);
+    await pageA.click('[data-tab=channel]');
+  });
+});
+
 test('a tablet with the token: asked for it, then a touch drag edits a channel', async () => {
   const tokenFile = join(work, 'token');
   writeFileSync(tokenFile, 'tablet-secret-123\n');

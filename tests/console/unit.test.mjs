@@ -6,7 +6,9 @@ import { test } from 'node:test';
 import { parseEvent, revisionOf } from '../../console/api.js';
 import {
   affects,
+  angles,
   channelColour,
+  direction,
   inRect,
   nearest,
   parseCorrespondences,
@@ -111,4 +113,16 @@ test('a pinch: the ratio of the fingers\' distances, only with two fingers down'
   assert.equal(pinchRatio(two, 1, -50, 0), 1.5);
   assert.equal(pinchRatio(new Map([[1, [0, 0]]]), 1, 5, 5), null);
   assert.equal(pinchRatio(two, 3, 0, 0), null, 'a pointer not down');
+});
+
+test('directions and their azimuth and elevation, as the daemon frames them', () => {
+  const close = (a, b) => a.every((v, k) => Math.abs(v - b[k]) < 1e-12);
+  assert.ok(close(direction(0, 0), [0, 0, -1]), 'ahead is −z');
+  assert.ok(close(direction(90, 0), [1, 0, 0]), 'right is +x');
+  assert.ok(close(direction(0, 90), [0, 1, 0]));
+  for (const [az, el] of [[-135, 20], [170, -45], [30, 80]]) {
+    assert.ok(close(angles(direction(az, el)), [az, el]), `${az}, ${el}`);
+  }
+  assert.ok(close(angles([0.2, 0, -0.2]), [45, 0]), 'any length');
+  assert.equal(angles([0, 0, 0]), null);
 });
