@@ -190,15 +190,16 @@ fn ids(w: usize, h: usize, label: &Label) -> Raster<[u8; 4]> {
         }
     });
     let number = (label.index + 1).to_string();
-    let big = (h / 3 / 8)
-        .max(1)
-        .min(w / (8 * number.len() + 8).max(1))
-        .max(1);
-    text(&mut img, &number, w / 2, h * 2 / 5, big);
-    let small = (h / 12 / 8)
-        .max(1)
-        .min(w / (8 * label.id.len().max(1) + 8).max(1))
-        .max(1);
+    // Font pixels as large as a share of the height allows, and the line still fits across.
+    let size = |height: usize, chars: usize| (height / 8).min(w / (8 * chars + 8)).max(1);
+    text(
+        &mut img,
+        &number,
+        w / 2,
+        h * 2 / 5,
+        size(h / 3, number.len()),
+    );
+    let small = size(h / 12, label.id.len().max(1));
     text(&mut img, label.id, w / 2, h * 3 / 4, small);
     img
 }

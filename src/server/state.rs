@@ -138,9 +138,8 @@ impl AppState {
     }
 }
 
-/// What each channel shows (`show.rs`): per channel id, the revision of the choice and the test
-/// card shown (`None`: its content). In memory only: a test card is for the minutes of an
-/// alignment, and after a restart every channel shows its content again.
+/// What each channel shows (see `show.rs`): per channel id, the revision of the choice and the
+/// test card shown (`None`: its content).
 #[derive(Default)]
 pub struct Shows(Mutex<HashMap<String, (u64, Option<Card>)>>);
 
