@@ -22,6 +22,7 @@ pub mod rig;
 pub mod scene;
 #[cfg(feature = "server")]
 pub mod server;
+pub mod structured;
 pub mod surface;
 pub mod tiles;
 

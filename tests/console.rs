@@ -192,3 +192,66 @@ async fn the_geometry_draws_each_projector_onto_the_wall() {
     let left = &channels[0];
     assert!(points(&left["spill"]).iter().any(|p| p[0] < -3.0), "{left}");
 }
+
+#[tokio::test]
+async fn the_served_patterns_decode_to_each_projector_pixel() {
+    use omniwarp::structured::decode::{DecodeOptions, decode};
+    use omniwarp::structured::{Grey, PatternSet};
+    let s = state(None, None);
+    let (_, _, body) = call(&s, get("/v1/channels")).await;
+    let left = json(&body)["channels"]
+        .as_array()
+        .and_then(|a| a.iter().find(|c| c["id"] == "left").cloned())
+        .unwrap();
+    let [w, h] = [0, 1].map(|k| left["resolution"][k].as_u64().unwrap() as u32);
+    let set = PatternSet::new(w, h).unwrap();
+    let mut frames = Vec::new();
+    for n in 0..set.len() {
+        let (st, hd, png) = call(&s, get(&format!("/v1/channels/left/pattern/{n}"))).await;
+        assert_eq!(st, StatusCode::OK, "frame {n}");
+        assert_eq!(hd[header::CONTENT_TYPE], "image/png");
+        let g = Grey::decode(&png, "png").unwrap();
+        assert_eq!((g.width, g.height), (w, h));
+        frames.push(g);
+    }
+    // The projector filmed by itself: every pixel decodes to its own coordinates.
+    let d = decode(&set, &frames, &DecodeOptions::default()).unwrap();
+    let mut seen = 0;
+    for y in 0..h {
+        for x in 0..w {
+            if let Some(p) = d.get(x, y) {
+                seen += 1;
+                let e = (p.q[0] - f64::from(x)).hypot(p.q[1] - f64::from(y));
+                assert!(e < 0.02, "({x}, {y}) decoded as {:?}", p.q);
+            }
+        }
+    }
+    assert_eq!(
+        seen,
+        ((w - 4) * (h - 4)) as usize,
+        "all but the eroded border"
+    );
+    for (uri, status, field) in [
+        (
+            format!("/v1/channels/left/pattern/{}", set.len()),
+            StatusCode::BAD_REQUEST,
+            Some("n"),
+        ),
+        (
+            "/v1/channels/left/pattern/one".into(),
+            StatusCode::BAD_REQUEST,
+            Some("n"),
+        ),
+        (
+            "/v1/channels/nope/pattern/0".into(),
+            StatusCode::NOT_FOUND,
+            None,
+        ),
+    ] {
+        let (st, _, body) = call(&s, get(&uri)).await;
+        assert_eq!(st, status, "{uri}");
+        if let Some(f) = field {
+            assert_eq!(json(&body)["field"], f, "{uri}");
+        }
+    }
+}

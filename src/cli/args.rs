@@ -264,3 +264,104 @@ pub fn named(e: omniwarp::Error) -> String {
         other => other.to_string(),
     }
 }
+
+/// The virtual bench's scene and conditions, shared by `omniwarp simulate` and
+/// `omniwarp bench camera`.
+#[derive(Args)]
+pub struct BenchConditions {
+    #[arg(long, default_value = "calibration/rigs/dome-180-tilt15-5proj.json")]
+    pub rig: PathBuf,
+    /// The projector's channel id (default: the rig's first).
+    #[arg(long)]
+    pub channel: Option<String>,
+    /// The camera as a rig channel (JSON: id, resolution, lens, pose). Default: a 185° fisheye
+    /// of --camera-size at the rig's eye, looking at the middle of the projector's image.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// The default camera's size.
+    #[arg(long, value_parser = parse_size, default_value = "1920x1080")]
+    pub camera_size: (u32, u32),
+    /// Sensor noise σ, grey levels.
+    #[arg(long, default_value_t = 2.0)]
+    pub noise: f64,
+    /// Point spread σ, camera pixels.
+    #[arg(long, default_value_t = 0.7)]
+    pub blur: f64,
+    /// Projector and camera gamma.
+    #[arg(long, default_value_t = 2.2)]
+    pub gamma: f64,
+    /// Ambient light, a fraction of the projector's white.
+    #[arg(long, default_value_t = 0.05)]
+    pub ambient: f64,
+    /// Light lost in the image corners, a fraction.
+    #[arg(long, default_value_t = 0.2)]
+    pub vignetting: f64,
+    /// One-bounce inter-reflection under white, a fraction of the direct light.
+    #[arg(long, default_value_t = 0.0)]
+    pub interreflection: f64,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl BenchConditions {
+    /// The rig, the projector, the camera and the bench's options, each error naming its flag.
+    pub fn setup(
+        &self,
+    ) -> Result<(
+        omniwarp::rig::Rig,
+        omniwarp::rig::Channel,
+        omniwarp::rig::Channel,
+        omniwarp::structured::bench::BenchOptions,
+    )> {
+        use omniwarp::rig::{Channel, ChannelDoc, Rig};
+        let rig = Rig::read(&self.rig).with_context(|| format!("--rig {}", self.rig.display()))?;
+        let projector = match &self.channel {
+            Some(id) => rig
+                .channel(id)
+                .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?,
+            None => &rig.channels[0],
+        }
+        .clone();
+        let camera = match &self.camera {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("--camera {}", path.display()))?;
+                let de = &mut serde_json::Deserializer::from_str(&text);
+                let doc: ChannelDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+                    anyhow::anyhow!(
+                        "--camera: {}: {}",
+                        omniwarp::rig::pointer_of(&e.path().to_string()),
+                        e.inner()
+                    )
+                })?;
+                Channel::from_doc(&doc, "")
+                    .map_err(|e| anyhow::anyhow!("--camera: {}", named(e)))?
+            }
+            None => omniwarp::structured::bench::fisheye_at_eye(
+                &rig,
+                &projector,
+                self.camera_size.0,
+                self.camera_size.1,
+            )
+            .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?,
+        };
+        let opts = omniwarp::structured::bench::BenchOptions {
+            noise: self.noise,
+            blur: self.blur,
+            projector_gamma: self.gamma,
+            camera_gamma: self.gamma,
+            ambient: self.ambient,
+            vignetting: self.vignetting,
+            interreflection: self.interreflection,
+            seed: self.seed,
+            ..Default::default()
+        };
+        opts.validate().map_err(|e| match e {
+            omniwarp::Error::Invalid { name, reason } => {
+                anyhow::anyhow!("--{}: {reason}", name.replace('_', "-"))
+            }
+            other => other.into(),
+        })?;
+        Ok((rig, projector, camera, opts))
+    }
+}

@@ -3,7 +3,7 @@
 use super::args::named;
 use anyhow::{Context, Result};
 use clap::Args;
-use omniwarp::calibration::{CorrespondencesDoc, calibrate};
+use omniwarp::calibration::{CorrespondencesDoc, ModelChoice, calibrate};
 use std::path::PathBuf;
 
 #[derive(Args)]
@@ -13,8 +13,36 @@ pub struct CalibrateArgs {
     /// optionally "lens": {"model": …, "intrinsics": […]} (known intrinsics or a seed),
     /// "model", "intrinsics_fixed"}. Pixels count from the centre of the top-left pixel; world
     /// in metres. Example: calibration/examples/points.json.
+    #[arg(
+        long,
+        required_unless_present = "captures",
+        conflicts_with = "captures"
+    )]
+    correspondences: Option<PathBuf>,
+    /// Instead of --correspondences: a folder of camera captures of the structured-light
+    /// sequence (PNG or JPEG, in name order: white, black, then per axis x and y the Gray bits
+    /// each with its inverse and 12 phase steps; `omniwarp bench camera --out` writes one).
+    /// Needs --camera, --rig and --channel.
+    #[arg(long, requires_all = ["camera", "rig", "channel"])]
+    captures: Option<PathBuf>,
+    /// The camera that took the captures, as a rig channel (JSON), its pose known.
     #[arg(long)]
-    correspondences: PathBuf,
+    camera: Option<PathBuf>,
+    /// The rig whose wall the camera looks at.
+    #[arg(long)]
+    rig: Option<PathBuf>,
+    /// The projector's channel in --rig: its resolution, and the calibration --check compares
+    /// with.
+    #[arg(long)]
+    channel: Option<String>,
+    /// With --captures: instead of calibrating, compare the captures with the channel as the
+    /// rig has it; write the per-pixel residuals here (EXR: R, G the residual in projector
+    /// pixels, B its length, A = 1 where decoded) and say whether the projector moved.
+    #[arg(long, requires = "captures")]
+    check: Option<PathBuf>,
+    /// Decoded camera pixels used as correspondences, at most (with --captures).
+    #[arg(long, default_value_t = 5000)]
+    points: usize,
     /// Lens model: `auto` (PINHOLE → OPENCV4 → 5 → 8 while held-out residuals improve) or a
     /// model name; overrides the file's "model" (default auto).
     #[arg(long)]
@@ -26,13 +54,17 @@ pub struct CalibrateArgs {
     #[arg(long, default_value = "projector")]
     id: String,
     /// The projector as a rig channel (JSON).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "check")]
+    out: Option<PathBuf>,
 }
 
 pub fn run(a: CalibrateArgs) -> Result<()> {
-    let text = std::fs::read_to_string(&a.correspondences)
-        .with_context(|| format!("--correspondences {}", a.correspondences.display()))?;
+    if let Some(dir) = &a.captures {
+        return from_captures(&a, dir);
+    }
+    let path = a.correspondences.as_ref().expect("clap requires one");
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("--correspondences {}", path.display()))?;
     let de = &mut serde_json::Deserializer::from_str(&text);
     let input: CorrespondencesDoc = serde_path_to_error::deserialize(de).map_err(|e| {
         anyhow::anyhow!(
@@ -58,6 +90,16 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("--correspondences: {}", named(e)))?;
     let cal = calibrate(&problem, choice)
         .map_err(|e| anyhow::anyhow!("--correspondences: {}", named(e)))?;
+    report(&cal, problem.points.len());
+    write_channel(
+        &cal,
+        &a.id,
+        resolution,
+        a.out.as_ref().expect("clap requires it"),
+    )
+}
+
+fn report(cal: &omniwarp::calibration::Calibration, points: usize) {
     let fit = &cal.fit;
     for c in &cal.considered {
         match c.held_out_rms {
@@ -72,7 +114,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         "chosen {}: RMS {:.4} px over {} points",
         fit.lens.model(),
         fit.rms,
-        problem.points.len()
+        points
     );
     for (name, s) in &fit.sigma {
         eprintln!("  σ({name}) = {s:.3e}");
@@ -80,12 +122,110 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     for w in &cal.warnings {
         eprintln!("warning: {w}");
     }
-    let doc = cal.channel_doc(&a.id, resolution);
+}
+
+fn write_channel(
+    cal: &omniwarp::calibration::Calibration,
+    id: &str,
+    resolution: [u32; 2],
+    out: &std::path::Path,
+) -> Result<()> {
+    let doc = cal.channel_doc(id, resolution);
     let json = serde_json::to_string_pretty(&doc)?;
-    omniwarp::image_io::atomic_write(&a.out, |f| {
+    omniwarp::image_io::atomic_write(out, |f| {
         use std::io::Write;
         f.write_all(json.as_bytes())
-            .map_err(|e| omniwarp::Error::file(&a.out, e))
+            .map_err(|e| omniwarp::Error::file(out, e))
     })?;
     Ok(())
+}
+
+/// `--captures`: decode, then calibrate or check.
+fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
+    use omniwarp::rig::{Channel, ChannelDoc, Rig};
+    use omniwarp::structured::decode::{DecodeOptions, decode};
+    use omniwarp::structured::{PatternSet, calibrate_captures, check, read_captures};
+    let rig_path = a.rig.as_ref().expect("clap requires it");
+    let rig = Rig::read(rig_path).with_context(|| format!("--rig {}", rig_path.display()))?;
+    let id = a.channel.as_deref().expect("clap requires it");
+    let projector = rig
+        .channel(id)
+        .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?;
+    let camera_path = a.camera.as_ref().expect("clap requires it");
+    let text = std::fs::read_to_string(camera_path)
+        .with_context(|| format!("--camera {}", camera_path.display()))?;
+    let de = &mut serde_json::Deserializer::from_str(&text);
+    let doc: ChannelDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+        anyhow::anyhow!(
+            "--camera: {}: {}",
+            omniwarp::rig::pointer_of(&e.path().to_string()),
+            e.inner()
+        )
+    })?;
+    let camera =
+        Channel::from_doc(&doc, "").map_err(|e| anyhow::anyhow!("--camera: {}", named(e)))?;
+    let frames = read_captures(dir).map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
+    let resolution = [projector.width, projector.height];
+    let opts = DecodeOptions::default();
+    if let Some(out) = &a.check {
+        let set = PatternSet::new(resolution[0], resolution[1])?;
+        let decoded = decode(&set, &frames, &opts)
+            .map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
+        let c = check(&decoded, &camera, &rig.doc.screen, projector);
+        if c.count == 0 {
+            anyhow::bail!(
+                "--captures: no camera pixel was decoded on the wall (rejected: {:?})",
+                decoded.rejected
+            );
+        }
+        let img =
+            omniwarp::raster::Raster::from_fn(c.width as usize, c.height as usize, |x, y| match c
+                .residuals[y * c.width as usize + x]
+            {
+                Some([dx, dy]) => [dx as f32, dy as f32, dx.hypot(dy) as f32, 1.0],
+                None => [0.0; 4],
+            });
+        omniwarp::image_io::write_exr_rgba(out, &img, &[], omniwarp::image_io::Precision::Float)?;
+        outln!(
+            "{} pixels compared: median {:.4} px, p95 {:.4} px, max {:.4} px; threshold {:.4} px: {}",
+            c.count,
+            c.p50,
+            c.p95,
+            c.max,
+            c.threshold,
+            if c.moved { "moved" } else { "not moved" }
+        );
+        return Ok(());
+    }
+    let choice = match a.model.as_deref().unwrap_or("auto") {
+        "auto" => ModelChoice::Auto,
+        m => ModelChoice::Fixed(
+            m.parse()
+                .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", e.reason()))?,
+        ),
+    };
+    omniwarp::limits::at_most("--points", a.points, omniwarp::limits::CALIBRATION_POINTS)
+        .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
+    let found = calibrate_captures(
+        resolution,
+        &frames,
+        &camera,
+        &rig.doc.screen,
+        choice,
+        a.points,
+        &opts,
+    )
+    .map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
+    eprintln!(
+        "decoded {} camera pixels (rejected: {:?})",
+        found.decoded.valid(),
+        found.decoded.rejected
+    );
+    report(&found.calibration, found.problem.points.len());
+    write_channel(
+        &found.calibration,
+        id,
+        resolution,
+        a.out.as_ref().expect("clap requires it"),
+    )
 }

@@ -27,6 +27,7 @@ mod projections;
 mod render;
 mod scene;
 mod serve;
+mod simulate;
 mod tiles;
 mod warp;
 
@@ -79,6 +80,10 @@ enum Command {
     /// Calibrate a projector from measured pixel ↔ wall-point correspondences; writes a rig
     /// channel.
     Calibrate(calibrate::CalibrateArgs),
+    /// The virtual projector–camera bench: what a camera sees while a projector shows the
+    /// structured-light sequence (blur, gamma, ambient, vignetting, inter-reflection, noise),
+    /// written as a capture folder for `calibrate --captures`, with the truth.
+    Simulate(simulate::SimulateArgs),
     /// Write the procedural city as glTF (.gltf + .bin, or .glb).
     Scene(scene::SceneExportArgs),
     /// Benchmarks: time one part of omniwarp and print the figures (run on demand, not in CI).
@@ -112,6 +117,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Blend(a) => blend::run(a),
         Command::Export(a) => export::run(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::Simulate(a) => simulate::run(a),
         Command::Scene(a) => scene::export(a),
         Command::Bench(c) => bench::run(c),
         Command::WarpBench { rig } => bench::rig::run(&rig),

@@ -119,6 +119,82 @@ pub struct Channel {
     pub rotation: DMat3,
 }
 
+impl Channel {
+    /// The channel as a document, its pose as a Rodrigues vector: what
+    /// [`Channel::from_doc`] reads back to the same channel.
+    pub fn doc(&self) -> ChannelDoc {
+        let (axis, angle) = glam::DQuat::from_mat3(&self.rotation).to_axis_angle();
+        ChannelDoc {
+            id: self.id.clone(),
+            resolution: [self.width, self.height],
+            lens: LensDoc {
+                model: self.lens.model().to_string(),
+                intrinsics: self.lens.intrinsics().to_vec(),
+            },
+            pose: PoseDoc {
+                position: self.position.to_array(),
+                look_to: None,
+                look_up: None,
+                rvec: Some((axis * angle).to_array()),
+            },
+        }
+    }
+
+    /// Validates one channel document (a projector, or a camera on the virtual bench) whose
+    /// fields sit under the JSON pointer `prefix`. The id is checked by the rig, which knows the
+    /// other ids.
+    pub fn from_doc(c: &ChannelDoc, prefix: &str) -> Result<Channel> {
+        let at = |f: &str| format!("{prefix}/{f}");
+        let [w, h] = c.resolution;
+        let side = crate::limits::CHANNEL_SIDE;
+        if !(1..=side).contains(&w) || !(1..=side).contains(&h) {
+            return Err(Error::invalid(
+                at("resolution"),
+                format!("must be between 1 and {side} pixels each way, got {w}×{h}"),
+            ));
+        }
+        let model: LensModel = c
+            .lens
+            .model
+            .parse()
+            .map_err(|e: Error| Error::invalid(at("lens/model"), e.reason()))?;
+        let lens = Lens::new(model, c.lens.intrinsics.clone())
+            .map_err(|e| Error::invalid(at("lens/intrinsics"), e.reason()))?;
+        let position = vec3(&at("pose/position"), c.pose.position)?;
+        let rotation = match (c.pose.look_to, c.pose.look_up, c.pose.rvec) {
+            (Some(to), Some(upv), None) => {
+                let f = crate::surface::unit(&at("pose/look_to"), DVec3::from_array(to))?;
+                let u = crate::surface::unit(&at("pose/look_up"), DVec3::from_array(upv))?;
+                let right = f.cross(u);
+                if right.length() < 1e-6 {
+                    return Err(Error::invalid(
+                        at("pose/look_up"),
+                        "must not be parallel to look_to",
+                    ));
+                }
+                let right = right.normalize();
+                // OpenCV frame: x right, y down, z forward.
+                DMat3::from_cols(right, f.cross(right), f)
+            }
+            (None, None, Some(r)) => rodrigues(vec3(&at("pose/rvec"), r)?),
+            _ => {
+                return Err(Error::invalid(
+                    at("pose"),
+                    "give either look_to and look_up, or rvec",
+                ));
+            }
+        };
+        Ok(Channel {
+            id: c.id.clone(),
+            width: w,
+            height: h,
+            lens,
+            position,
+            rotation,
+        })
+    }
+}
+
 /// A validated rig.
 #[derive(Debug, Clone)]
 pub struct Rig {
@@ -215,53 +291,7 @@ impl Rig {
                     format!("`{}` is used by another channel", c.id),
                 ));
             }
-            let [w, h] = c.resolution;
-            let side = crate::limits::CHANNEL_SIDE;
-            if !(1..=side).contains(&w) || !(1..=side).contains(&h) {
-                return Err(Error::invalid(
-                    at("resolution"),
-                    format!("must be between 1 and {side} pixels each way, got {w}×{h}"),
-                ));
-            }
-            let model: LensModel = c
-                .lens
-                .model
-                .parse()
-                .map_err(|e: Error| Error::invalid(at("lens/model"), e.reason()))?;
-            let lens = Lens::new(model, c.lens.intrinsics.clone())
-                .map_err(|e| Error::invalid(at("lens/intrinsics"), e.reason()))?;
-            let position = vec3(&at("pose/position"), c.pose.position)?;
-            let rotation = match (c.pose.look_to, c.pose.look_up, c.pose.rvec) {
-                (Some(to), Some(upv), None) => {
-                    let f = crate::surface::unit(&at("pose/look_to"), DVec3::from_array(to))?;
-                    let u = crate::surface::unit(&at("pose/look_up"), DVec3::from_array(upv))?;
-                    let right = f.cross(u);
-                    if right.length() < 1e-6 {
-                        return Err(Error::invalid(
-                            at("pose/look_up"),
-                            "must not be parallel to look_to",
-                        ));
-                    }
-                    let right = right.normalize();
-                    // OpenCV frame: x right, y down, z forward.
-                    DMat3::from_cols(right, f.cross(right), f)
-                }
-                (None, None, Some(r)) => rodrigues(vec3(&at("pose/rvec"), r)?),
-                _ => {
-                    return Err(Error::invalid(
-                        at("pose"),
-                        "give either look_to and look_up, or rvec",
-                    ));
-                }
-            };
-            channels.push(Channel {
-                id: c.id.clone(),
-                width: w,
-                height: h,
-                lens,
-                position,
-                rotation,
-            });
+            channels.push(Channel::from_doc(c, &format!("/channels/{n}"))?);
         }
         Ok(Rig {
             doc,

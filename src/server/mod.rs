@@ -93,6 +93,7 @@ routes! {
     "/v1/channels/{id}/render" => get(outputs::render);
     "/v1/channels/{id}/show" => get(show::get_show).put(show::put_show);
     "/v1/channels/{id}/output.png" => get(show::output);
+    "/v1/channels/{id}/pattern/{n}" => get(show::pattern);
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
     "/v1/meshes" => get(meshes::list);

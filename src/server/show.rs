@@ -12,6 +12,7 @@ use super::preview::Grid;
 use super::state::{AppState, Query, if_match, parse_body, tagged};
 use crate::content::testcard::{self, Card, Label};
 use crate::image_io::{Compression, png_bytes_with};
+use crate::structured::PatternSet;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;
@@ -106,5 +107,29 @@ pub async fn output(
         Ok(png_bytes_with(&img, Compression::Fast)?)
     })
     .await?;
+    outputs::file(&s, png, "image/png", &etag)
+}
+
+/// Frame `n` of the channel's structured-light sequence (`src/structured/mod.rs`), an 8-bit
+/// grey PNG at the channel's resolution: what a media server or the console puts on the
+/// projector while a camera captures it for `omniwarp calibrate --captures`.
+pub async fn pattern(
+    State(s): State<Arc<AppState>>,
+    Path((id, n)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let (rig, _) = s.store.snapshot();
+    let ch = rig
+        .channels
+        .iter()
+        .find(|c| c.id == id)
+        .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
+    let set = PatternSet::new(ch.width, ch.height)?;
+    let n: usize = n.parse().map_err(|_| ApiError::Invalid {
+        field: "n".into(),
+        reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
+    })?;
+    let frame = set.frame(n, "n")?;
+    let etag = format!("\"pattern-{}x{}-{n}\"", ch.width, ch.height);
+    let png = run_job(&s, move |_| Ok(set.image(frame).png()?)).await?;
     outputs::file(&s, png, "image/png", &etag)
 }

@@ -3,6 +3,7 @@
 //! on demand, not in CI, because absolute timings here are noisy.
 
 pub mod calibrate;
+pub mod camera;
 pub mod chart;
 pub mod gpu;
 pub mod lens;
@@ -46,6 +47,10 @@ pub enum BenchCommand {
     /// What keeping a tile edit costs: the SQLite store with its history against the file
     /// store of 0.1.0, 8 and 32 writers; revert cost; history size after 100k edits.
     Store(store::StoreBenchArgs),
+    /// The virtual projector–camera bench: a projector shows the structured-light sequence, a
+    /// simulated camera captures it (blur, gamma, ambient, vignetting, inter-reflection,
+    /// noise); decoding and calibration measured against the truth.
+    Camera(camera::CameraBenchArgs),
     /// Calibration against point count (50, 500, 5000) and lens model.
     Calibrate,
     /// Lens models: project and unproject throughput, one thread and all cores.
@@ -71,6 +76,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Ppp(a) => ppp::run(a),
         BenchCommand::Serve(a) => serve::run(a),
         BenchCommand::Store(a) => store::run(a),
+        BenchCommand::Camera(a) => camera::run(a),
         BenchCommand::Calibrate => calibrate::run(),
         BenchCommand::Lens => lens::run(),
         BenchCommand::Tiles => tiles::run(),

@@ -1,0 +1,501 @@
+//! Structured light: the patterns a projector shows so that a camera can tell, for each of its
+//! pixels, which projector pixel lights it — the measurement behind camera-based calibration.
+//!
+//! Each axis is coded twice over, because each code alone fails somewhere:
+//!
+//! * **Gray code** down to half a phase period, every bit followed by its inverse. A bit is
+//!   read as "brighter than its inverse", which needs no threshold and no knowledge of the
+//!   wall's albedo, the ambient light or either gamma. Neighbouring codes differ in one bit, so
+//!   a pixel on a stripe edge can only be read as one of the two stripes it touches.
+//! * **N-step phase shift** of a sinusoid with period [`PERIOD`] projector pixels, in
+//!   [`STEPS`] steps: the phase gives a sub-pixel position within the period. With 12 steps,
+//!   harmonics 2–10 of the sinusoid cancel in the phase, so the projector's and the camera's
+//!   gamma (which bend the sinusoid) do not bias it. Inter-reflection spreads light over
+//!   distances much longer than 16 px, where a sinusoid and both Gray stripes average alike,
+//!   so it adds an offset and leaves the phase and the bits alone.
+//!
+//! The Gray code names the half period, the phase the position within the period; the two
+//! are joined by taking the period whose phase lies nearest the Gray half-period's centre,
+//! which is right even when the Gray code is off by one half period at a stripe edge.
+//!
+//! Frame order (what a capture folder holds, and what `GET /v1/channels/{id}/pattern/{n}`
+//! serves): white, black, then for x and then y: the Gray bits from the most significant, each
+//! as (pattern, inverse), then the phase steps. [`PatternSet::frames`] names every frame.
+
+pub mod bench;
+pub mod decode;
+
+use crate::error::{Error, Result};
+use std::f64::consts::TAU;
+
+/// The phase-shift period in projector pixels.
+pub const PERIOD: u32 = 16;
+/// Phase steps per axis.
+pub const STEPS: u32 = 12;
+
+/// An 8-bit single-channel image, row-major, top row first: a pattern or a camera capture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grey {
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<u8>,
+}
+
+impl Grey {
+    pub fn png(&self) -> Result<Vec<u8>> {
+        let mut out = Vec::new();
+        let mut enc = png::Encoder::new(&mut out, self.width, self.height);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        let mut w = enc
+            .write_header()
+            .map_err(|e| Error::invalid("png", e.to_string()))?;
+        w.write_image_data(&self.data)
+            .map_err(|e| Error::invalid("png", e.to_string()))?;
+        w.finish()
+            .map_err(|e| Error::invalid("png", e.to_string()))?;
+        Ok(out)
+    }
+
+    /// Reads a PNG or JPEG of any colour type as luma (Rec. 709 weights, as the `image`
+    /// crate converts). `field` names the input in errors.
+    pub fn decode(bytes: &[u8], field: &str) -> Result<Grey> {
+        let img = image::load_from_memory(bytes)
+            .map_err(|e| Error::invalid(field, format!("is not a PNG or JPEG image: {e}")))?;
+        let (w, h) = (img.width(), img.height());
+        crate::limits::at_most(field, (w as usize) * (h as usize), CAPTURE_PIXELS)?;
+        Ok(Grey {
+            width: w,
+            height: h,
+            data: img.into_luma8().into_raw(),
+        })
+    }
+}
+
+/// The most pixels a camera capture may hold (a 20-megapixel camera fits).
+pub const CAPTURE_PIXELS: usize = 24 << 20;
+
+/// Which axis a frame codes: projector columns (x) or rows (y).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Axis {
+    X,
+    Y,
+}
+
+/// One frame of the sequence.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Frame {
+    White,
+    Black,
+    /// Gray code bit `bit` (0 = most significant) of half-period stripes.
+    Gray {
+        axis: Axis,
+        bit: u32,
+        inverse: bool,
+    },
+    /// Phase step `step` of [`STEPS`].
+    Phase {
+        axis: Axis,
+        step: u32,
+    },
+}
+
+/// The pattern sequence for one projector.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PatternSet {
+    pub width: u32,
+    pub height: u32,
+}
+
+impl PatternSet {
+    pub fn new(width: u32, height: u32) -> Result<PatternSet> {
+        let side = crate::limits::CHANNEL_SIDE;
+        if !(1..=side).contains(&width) || !(1..=side).contains(&height) {
+            return Err(Error::invalid(
+                "resolution",
+                format!("must be between 1 and {side} pixels each way, got {width}×{height}"),
+            ));
+        }
+        Ok(PatternSet { width, height })
+    }
+
+    fn side(&self, axis: Axis) -> u32 {
+        match axis {
+            Axis::X => self.width,
+            Axis::Y => self.height,
+        }
+    }
+
+    /// Gray bits for an axis: enough to number its half periods.
+    pub fn bits(&self, axis: Axis) -> u32 {
+        let halves = self.side(axis).div_ceil(PERIOD / 2);
+        (u32::BITS - (halves - 1).leading_zeros()).max(1)
+    }
+
+    /// Every frame in order.
+    pub fn frames(&self) -> Vec<Frame> {
+        let mut out = vec![Frame::White, Frame::Black];
+        for axis in [Axis::X, Axis::Y] {
+            for bit in 0..self.bits(axis) {
+                for inverse in [false, true] {
+                    out.push(Frame::Gray { axis, bit, inverse });
+                }
+            }
+            for step in 0..STEPS {
+                out.push(Frame::Phase { axis, step });
+            }
+        }
+        out
+    }
+
+    pub fn len(&self) -> usize {
+        2 + 2 * STEPS as usize + 2 * (self.bits(Axis::X) + self.bits(Axis::Y)) as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Frame `n`, or an error naming `field` when there is none.
+    pub fn frame(&self, n: usize, field: &str) -> Result<Frame> {
+        self.frames().get(n).copied().ok_or_else(|| {
+            Error::invalid(
+                field,
+                format!(
+                    "frame {n} does not exist: a {}×{} projector's sequence has {} (0–{})",
+                    self.width,
+                    self.height,
+                    self.len(),
+                    self.len() - 1
+                ),
+            )
+        })
+    }
+
+    /// The frame's 8-bit value along its axis at projector column or row `i`: every pattern
+    /// varies along one axis only.
+    pub fn value(&self, frame: Frame, i: u32) -> u8 {
+        match frame {
+            Frame::White => 255,
+            Frame::Black => 0,
+            Frame::Gray { axis, bit, inverse } => {
+                let half = i / (PERIOD / 2);
+                let gray = half ^ (half >> 1);
+                let on = (gray >> (self.bits(axis) - 1 - bit)) & 1 == 1;
+                if on != inverse { 255 } else { 0 }
+            }
+            Frame::Phase { step, .. } => {
+                let v = 0.5 + 0.5 * phase_cos(f64::from(i), step);
+                (255.0 * v).round() as u8
+            }
+        }
+    }
+
+    /// One row (x frames) or column (y frames, and white and black) of the frame's values.
+    pub fn profile(&self, frame: Frame) -> Vec<u8> {
+        let axis = match frame {
+            Frame::Gray { axis, .. } | Frame::Phase { axis, .. } => axis,
+            _ => Axis::X,
+        };
+        (0..self.side(axis)).map(|i| self.value(frame, i)).collect()
+    }
+
+    /// The frame as the projector shows it.
+    pub fn image(&self, frame: Frame) -> Grey {
+        let profile = self.profile(frame);
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut data = vec![0u8; w * h];
+        let by_column = !matches!(
+            frame,
+            Frame::Gray { axis: Axis::Y, .. } | Frame::Phase { axis: Axis::Y, .. }
+        );
+        for (y, row) in data.chunks_exact_mut(w).enumerate() {
+            if by_column {
+                row.copy_from_slice(&profile);
+            } else {
+                row.fill(profile[y]);
+            }
+        }
+        Grey {
+            width: self.width,
+            height: self.height,
+            data,
+        }
+    }
+}
+
+/// The phase pattern's cosine at projector coordinate `x` for step `step`:
+/// cos(2π·x/P − 2π·step/N). Pixel centres sit at integer `x`.
+fn phase_cos(x: f64, step: u32) -> f64 {
+    (TAU * x / f64::from(PERIOD) - step_angle(step)).cos()
+}
+
+fn step_angle(step: u32) -> f64 {
+    TAU * f64::from(step) / f64::from(STEPS)
+}
+
+/// Projector pixel ↔ wall point correspondences from a decoded map, for a camera of known
+/// pose: each decoded camera pixel's ray is followed to the wall. At most `limit` are taken, on
+/// a regular lattice over the decoded pixels (keeping the image's coverage, which is what
+/// determines the lens), the most confident first where a lattice cell holds several.
+pub fn correspondences(
+    decoded: &decode::Decoded,
+    camera: &crate::rig::Channel,
+    screen: &crate::surface::Screen,
+    limit: usize,
+) -> Vec<crate::calibration::Correspondence> {
+    let valid = decoded.valid();
+    if valid == 0 || limit == 0 {
+        return Vec::new();
+    }
+    // The lattice step that keeps at most `limit` of the decoded pixels.
+    let step = ((valid as f64 / limit as f64).sqrt().ceil() as u32).max(1);
+    let mut out = Vec::new();
+    for cy in (0..decoded.height).step_by(step as usize) {
+        for cx in (0..decoded.width).step_by(step as usize) {
+            let mut best: Option<(u32, u32, decode::Sample)> = None;
+            for y in cy..(cy + step).min(decoded.height) {
+                for x in cx..(cx + step).min(decoded.width) {
+                    if let Some(s) = decoded.get(x, y)
+                        && best.is_none_or(|b| s.sigma < b.2.sigma)
+                    {
+                        best = Some((x, y, s));
+                    }
+                }
+            }
+            let Some((x, y, s)) = best else { continue };
+            let Ok(ray) = camera.lens.unproject([f64::from(x), f64::from(y)]) else {
+                continue;
+            };
+            if let crate::surface::Hit::Lit { point, .. } =
+                screen.intersect(camera.position, camera.rotation * ray)
+            {
+                out.push(crate::calibration::Correspondence {
+                    pixel: s.q,
+                    world: point.to_array(),
+                });
+            }
+        }
+    }
+    out.truncate(limit);
+    out
+}
+
+/// What a capture set made of a projector: the decoded map, the correspondences taken from
+/// it, and the calibration.
+pub struct FromCaptures {
+    pub decoded: decode::Decoded,
+    pub problem: crate::calibration::Problem,
+    pub calibration: crate::calibration::Calibration,
+}
+
+/// Decodes `frames` (the sequence of a `resolution` projector, in order), turns at most
+/// `points` decoded pixels into correspondences through `camera` (pose known) onto `screen`,
+/// and calibrates.
+pub fn calibrate_captures(
+    resolution: [u32; 2],
+    frames: &[Grey],
+    camera: &crate::rig::Channel,
+    screen: &crate::surface::Screen,
+    choice: crate::calibration::ModelChoice,
+    points: usize,
+    opts: &decode::DecodeOptions,
+) -> Result<FromCaptures> {
+    let set = PatternSet::new(resolution[0], resolution[1])?;
+    if let Some(f) = frames.first()
+        && (f.width, f.height) != (camera.width, camera.height)
+    {
+        return Err(Error::invalid(
+            "captures",
+            format!(
+                "are {}×{}, the camera {}×{}",
+                f.width, f.height, camera.width, camera.height
+            ),
+        ));
+    }
+    let decoded = decode::decode(&set, frames, opts)?;
+    let found = correspondences(&decoded, camera, screen, points);
+    if found.len() < 50 {
+        return Err(Error::invalid(
+            "captures",
+            format!(
+                "only {} camera pixels were decoded on the wall (rejected: {:?}); is the \
+                 projector lit and in view, and the camera's pose right?",
+                found.len(),
+                decoded.rejected
+            ),
+        ));
+    }
+    let problem = crate::calibration::Problem {
+        resolution,
+        points: found,
+        lens: None,
+        intrinsics_fixed: false,
+    };
+    let calibration = crate::calibration::calibrate(&problem, choice)?;
+    Ok(FromCaptures {
+        decoded,
+        problem,
+        calibration,
+    })
+}
+
+/// The capture files of a folder in name order: every `.png`, `.jpg` and `.jpeg` (other files,
+/// such as the camera's JSON, are left alone).
+pub fn read_captures(dir: &std::path::Path) -> Result<Vec<Grey>> {
+    let mut names: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| Error::file(dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
+        })
+        .collect();
+    names.sort();
+    crate::limits::at_most("captures", names.len(), MAX_FRAMES)?;
+    names
+        .iter()
+        .map(|p| {
+            let bytes = std::fs::read(p).map_err(|e| Error::file(p, e))?;
+            Grey::decode(&bytes, &p.display().to_string())
+        })
+        .collect()
+}
+
+/// The most frames a capture set may hold (a 16384-pixel projector needs 2 + 2·(2·11 + 12)).
+pub const MAX_FRAMES: usize = 80;
+
+/// A fresh capture compared with what the current calibration predicts.
+#[derive(Debug, Clone)]
+pub struct Check {
+    pub width: u32,
+    pub height: u32,
+    /// Per camera pixel: decoded − predicted projector coordinate, pixels.
+    pub residuals: Vec<Option<[f64; 2]>>,
+    /// Pixels compared.
+    pub count: usize,
+    pub p50: f64,
+    pub p95: f64,
+    pub max: f64,
+    /// The median residual above which the projector is said to have moved: 0.15 px, or 4×
+    /// the capture's own median predicted deviation where the capture is noisier.
+    pub threshold: f64,
+    pub moved: bool,
+}
+
+/// The smallest median residual, projector pixels, that [`check`] calls a move.
+pub const MOVED_PX: f64 = 0.15;
+
+/// Compares a decoded capture with channel `projector` as calibrated: each decoded camera
+/// pixel's wall point (the camera's pose known) projected through the channel's model. A
+/// projector that moved or whose lens drifted shifts the whole map; noise moves single
+/// pixels, so the verdict is on the median.
+pub fn check(
+    decoded: &decode::Decoded,
+    camera: &crate::rig::Channel,
+    screen: &crate::surface::Screen,
+    projector: &crate::rig::Channel,
+) -> Check {
+    use rayon::prelude::*;
+    let w = decoded.width as usize;
+    let residuals: Vec<Option<[f64; 2]>> = decoded
+        .samples
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .map(|(i, s)| {
+            let s = (*s)?;
+            let ray = camera
+                .lens
+                .unproject([(i % w) as f64, (i / w) as f64])
+                .ok()?;
+            let crate::surface::Hit::Lit { point, .. } =
+                screen.intersect(camera.position, camera.rotation * ray)
+            else {
+                return None;
+            };
+            let q = projector
+                .lens
+                .project(projector.rotation.transpose() * (point - projector.position))
+                .ok()?;
+            Some([s.q[0] - q[0], s.q[1] - q[1]])
+        })
+        .collect();
+    let mut size: Vec<f64> = residuals
+        .iter()
+        .flatten()
+        .map(|r| r[0].hypot(r[1]))
+        .collect();
+    let mut sigma: Vec<f64> = decoded.samples.iter().flatten().map(|s| s.sigma).collect();
+    size.sort_by(f64::total_cmp);
+    sigma.sort_by(f64::total_cmp);
+    let at = |v: &[f64], p: f64| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v[((v.len() - 1) as f64 * p).round() as usize]
+        }
+    };
+    let threshold = MOVED_PX.max(4.0 * at(&sigma, 0.5));
+    let p50 = at(&size, 0.5);
+    Check {
+        width: decoded.width,
+        height: decoded.height,
+        count: size.len(),
+        p50,
+        p95: at(&size, 0.95),
+        max: size.last().copied().unwrap_or(f64::NAN),
+        threshold,
+        moved: p50 > threshold,
+        residuals,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn neighbouring_half_periods_differ_in_one_bit() {
+        let set = PatternSet::new(1920, 1200).unwrap();
+        assert_eq!(set.bits(Axis::X), 8, "240 half periods need 8 bits");
+        assert_eq!(set.bits(Axis::Y), 8, "150 half periods need 8 bits");
+        assert_eq!(set.len(), 2 + 2 * (16 + 12));
+        let bits = |i: u32| -> Vec<u8> {
+            (0..set.bits(Axis::X))
+                .map(|bit| {
+                    set.value(
+                        Frame::Gray {
+                            axis: Axis::X,
+                            bit,
+                            inverse: false,
+                        },
+                        i,
+                    )
+                })
+                .collect()
+        };
+        for h in 0..239 {
+            let (a, b) = (bits(h * 8), bits(h * 8 + 8));
+            let differ = a.iter().zip(&b).filter(|(p, q)| p != q).count();
+            assert_eq!(differ, 1, "half periods {h} and {}", h + 1);
+        }
+        let f = Frame::Gray {
+            axis: Axis::Y,
+            bit: 3,
+            inverse: false,
+        };
+        let inv = Frame::Gray {
+            axis: Axis::Y,
+            bit: 3,
+            inverse: true,
+        };
+        let (a, b) = (set.image(f), set.image(inv));
+        assert!(a.data.iter().zip(&b.data).all(|(p, q)| p ^ q == 255));
+        // A y frame is constant along rows.
+        assert!(a.data[..1920].iter().all(|&v| v == a.data[0]));
+        assert!(set.frame(set.len(), "n").is_err());
+    }
+}

@@ -1,0 +1,367 @@
+//! Camera calibration on the virtual bench, against its ground truth: the dome example rig, a
+//! 185° fisheye camera at the centre, 8-bit captures with σ = 2 grey levels of noise, both
+//! gammas 2.2, 0.7 px blur and 5 % ambient (issue 19's figures).
+
+use omniwarp::calibration::{ModelChoice, Problem, calibrate};
+use omniwarp::rig::{Channel, ChannelDoc, LensDoc, PoseDoc, Rig};
+use omniwarp::structured::bench::{Bench, BenchOptions};
+use omniwarp::structured::decode::{DecodeOptions, Decoded, decode};
+use omniwarp::structured::{Grey, check, correspondences};
+use std::path::Path;
+
+fn dome() -> Rig {
+    Rig::read(Path::new("calibration/rigs/dome-180-tilt15-5proj.json")).unwrap()
+}
+
+/// A 185° fisheye filling the height of a `w`×`h` image, at the dome's centre, looking at its
+/// zenith.
+fn fisheye(w: u32, h: u32) -> Channel {
+    let f = f64::from(h) / 2.0 / 92.5f64.to_radians();
+    let t = 15f64.to_radians();
+    let doc = ChannelDoc {
+        id: "camera".into(),
+        resolution: [w, h],
+        lens: LensDoc {
+            model: "LENSMODEL_OPENCV_FISHEYE".into(),
+            intrinsics: vec![
+                f,
+                f,
+                f64::from(w) / 2.0 - 0.5,
+                f64::from(h) / 2.0 - 0.5,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        },
+        pose: PoseDoc {
+            position: [0.0, 0.0, 0.0],
+            look_to: Some([0.0, t.cos(), -t.sin()]),
+            look_up: Some([0.0, 0.0, -1.0]),
+            rvec: None,
+        },
+    };
+    Channel::from_doc(&doc, "/camera").unwrap()
+}
+
+/// A pinhole camera of focal length `f` pixels at the dome's centre, looking along `look_to`.
+fn pinhole(w: u32, h: u32, f: f64, look_to: [f64; 3]) -> Channel {
+    let doc = ChannelDoc {
+        id: "camera".into(),
+        resolution: [w, h],
+        lens: LensDoc {
+            model: "LENSMODEL_PINHOLE".into(),
+            intrinsics: vec![f, f, f64::from(w) / 2.0 - 0.5, f64::from(h) / 2.0 - 0.5],
+        },
+        pose: PoseDoc {
+            position: [0.0, 0.0, 0.0],
+            look_to: Some(look_to),
+            look_up: Some([0.0, 1.0, 0.0]),
+            rvec: None,
+        },
+    };
+    Channel::from_doc(&doc, "/camera").unwrap()
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn capture_all(bench: &Bench) -> Vec<Grey> {
+    (0..bench.patterns().len())
+        .map(|n| bench.capture(n).unwrap())
+        .collect()
+}
+
+/// Decoded − true projector coordinate over the pixels both know; and how many the truth
+/// lights.
+fn decode_errors(bench: &Bench, decoded: &Decoded) -> (Vec<f64>, usize) {
+    let (mut errors, mut lit) = (Vec::new(), 0);
+    for y in 0..decoded.height {
+        for x in 0..decoded.width {
+            let truth = bench.truth(x, y);
+            lit += usize::from(truth.is_some());
+            if let (Some(s), Some(t)) = (decoded.get(x, y), truth) {
+                errors.push((s.q[0] - t[0]).hypot(s.q[1] - t[1]));
+            }
+        }
+    }
+    (errors, lit)
+}
+
+#[test]
+fn captures_decode_and_calibrate_the_dome_projector_to_its_truth() {
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    let camera = fisheye(1920, 1080);
+    let bench = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let frames = capture_all(&bench);
+    let decoded = decode(bench.patterns(), &frames, &DecodeOptions::default()).unwrap();
+    let (mut errors, lit) = decode_errors(&bench, &decoded);
+    let valid = errors.len();
+    assert!(valid as f64 > 0.95 * lit as f64, "decoded {valid} of {lit}");
+    let gross = errors.iter().filter(|&&e| e > 1.0).count();
+    let p50 = percentile(&mut errors, 0.5);
+    let p99 = percentile(&mut errors, 0.99);
+    eprintln!(
+        "{lit} lit camera pixels, {valid} decoded; error median {p50:.4} px, p99 {p99:.4} px, \
+         {gross} above 1 px; rejected {:?}",
+        decoded.rejected
+    );
+    assert!(p50 <= 0.05, "median {p50}");
+    assert!(p99 <= 0.3, "p99 {p99}");
+    assert!(gross as f64 <= 0.001 * valid as f64, "{gross} gross errors");
+
+    let points = correspondences(&decoded, &camera, &rig.doc.screen, 20_000);
+    assert!(points.len() > 15_000, "{} points", points.len());
+    let problem = Problem {
+        resolution: [projector.width, projector.height],
+        points,
+        lens: None,
+        intrinsics_fixed: false,
+    };
+    let cal = calibrate(&problem, ModelChoice::Fixed(projector.lens.model())).unwrap();
+    let fitted = Channel::from_doc(&cal.channel_doc("front", [1920, 1200]), "").unwrap();
+    let moved = (fitted.position - projector.position).length();
+    let turned = (fitted.rotation.transpose() * projector.rotation)
+        .to_cols_array()
+        .iter()
+        .step_by(4)
+        .sum::<f64>();
+    let turned = ((turned - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
+    // Where the calibrated projector puts each of its pixels, seen in the true projector's
+    // pixels: the warp's error, and the reprojection error against noise-free truth.
+    let mut warp = Vec::new();
+    for j in (0..1200).step_by(8) {
+        for i in (0..1920).step_by(8) {
+            let q = [f64::from(i), f64::from(j)];
+            let Some(p) = rig.wall_point(&projector, q) else {
+                continue;
+            };
+            let truth = projector
+                .lens
+                .project(projector.rotation.transpose() * (p - projector.position))
+                .unwrap();
+            assert!((truth[0] - q[0]).hypot(truth[1] - q[1]) < 1e-6);
+            let Some(pf) = rig.wall_point(&fitted, q) else {
+                continue;
+            };
+            let landed = projector
+                .lens
+                .project(projector.rotation.transpose() * (pf - projector.position))
+                .unwrap();
+            warp.push((landed[0] - q[0]).hypot(landed[1] - q[1]));
+        }
+    }
+    let rms = (warp.iter().map(|e| e * e).sum::<f64>() / warp.len() as f64).sqrt();
+    let warp99 = percentile(&mut warp, 0.99);
+    eprintln!(
+        "fit: {} points, RMS {:.4} px; position off by {:.3} mm, rotation by {turned:.5}°; \
+         against truth over {} lit projector pixels: RMS {rms:.4} px, p99 {warp99:.4} px",
+        problem.points.len(),
+        cal.fit.rms,
+        moved * 1e3,
+        warp.len()
+    );
+    assert!(moved < 0.002, "position off by {moved} m");
+    assert!(turned < 0.02, "rotation off by {turned}°");
+    assert!(rms <= 0.1, "reprojection RMS {rms}");
+    assert!(warp99 <= 0.05, "warp p99 {warp99}");
+
+    // The check against the calibration it came from: nothing moved.
+    let verdict = check(&decoded, &camera, &rig.doc.screen, &fitted);
+    assert!(!verdict.moved, "{verdict:?}");
+}
+
+#[test]
+fn inter_reflection_on_the_dome_leaves_one_percent_gross_errors_at_most() {
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    let camera = fisheye(1920, 1080);
+    let opts = BenchOptions {
+        interreflection: 0.2,
+        ..BenchOptions::default()
+    };
+    let bench = Bench::new(&rig, &projector, &camera, opts).unwrap();
+    let frames = capture_all(&bench);
+    // The bounce lights the whole dome: under white, the pixels the projector does not reach
+    // are brighter than without it.
+    let plain = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let white_plain = plain.capture(0).unwrap();
+    let brighter = (0..1080)
+        .flat_map(|y| (0..1920).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let i = (y * 1920 + x) as usize;
+            bench.truth(x, y).is_none() && frames[0].data[i] > white_plain.data[i] + 10
+        })
+        .count();
+    let decoded = decode(bench.patterns(), &frames, &DecodeOptions::default()).unwrap();
+    let (errors, lit) = decode_errors(&bench, &decoded);
+    let gross = errors.iter().filter(|&&e| e > 1.0).count();
+    eprintln!(
+        "20 % inter-reflection: {} of {lit} lit pixels decoded, {gross} above 1 px; {brighter} \
+         pixels brighter in black; rejected {:?}",
+        errors.len(),
+        decoded.rejected
+    );
+    assert!(errors.len() as f64 > 0.9 * lit as f64);
+    assert!(gross as f64 <= 0.01 * errors.len() as f64);
+    // Outside the projector's light, nothing is decoded although the bounce lights it.
+    for y in 0..1080 {
+        for x in 0..1920 {
+            if bench.truth(x, y).is_none() {
+                assert!(
+                    decoded.get(x, y).is_none(),
+                    "({x}, {y}) decoded in the dark"
+                );
+            }
+        }
+    }
+    assert!(brighter > 100_000, "{brighter}");
+}
+
+#[test]
+fn a_yaw_of_five_hundredths_of_a_degree_is_detected_and_noise_is_not() {
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    // A small camera watching the projector: the verdict is on the median of thousands of
+    // pixels either way.
+    let camera = pinhole(480, 270, 400.0, [0.0, 0.173648, -0.984808]);
+    let mut bench = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let opts = DecodeOptions::default();
+    for seed in 100..120 {
+        bench.reseed(seed);
+        let decoded = decode(bench.patterns(), &capture_all(&bench), &opts).unwrap();
+        let c = check(&decoded, &camera, &rig.doc.screen, &projector);
+        assert!(c.count > 3000, "{} pixels compared", c.count);
+        assert!(!c.moved, "false alarm with seed {seed}: {c:?}");
+    }
+    // The projector turns 0.05° about the dome's vertical; the rig still says where it was.
+    let mut doc = rig.doc.clone();
+    let turn = glam::DMat3::from_axis_angle(glam::DVec3::Y, 0.05f64.to_radians());
+    let front = &mut doc.channels[0];
+    let to = turn * glam::DVec3::from_array(front.pose.look_to.unwrap());
+    let up = turn * glam::DVec3::from_array(front.pose.look_up.unwrap());
+    front.pose.look_to = Some(to.to_array());
+    front.pose.look_up = Some(up.to_array());
+    let turned_rig = Rig::from_doc(doc).unwrap();
+    let turned = turned_rig.channel("front").unwrap().clone();
+    let bench = Bench::new(&turned_rig, &turned, &camera, BenchOptions::default()).unwrap();
+    let decoded = decode(bench.patterns(), &capture_all(&bench), &opts).unwrap();
+    let c = check(&decoded, &camera, &rig.doc.screen, &projector);
+    eprintln!(
+        "0.05° yaw: median residual {:.3} px (threshold {:.3}), p95 {:.3}, max {:.3}",
+        c.p50, c.threshold, c.p95, c.max
+    );
+    assert!(c.moved, "{c:?}");
+}
+
+#[test]
+fn simulated_captures_calibrate_and_check_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let caps = dir.path().join("captures");
+    let rig = "calibration/rigs/dome-180-tilt15-5proj.json";
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let caps_s = caps.to_str().unwrap();
+    let (ok, out, err) = run(&[
+        "simulate",
+        "--rig",
+        rig,
+        "--channel",
+        "front",
+        "--camera-size",
+        "1280x720",
+        "--out",
+        caps_s,
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.starts_with("58 captures of `front`"), "{out}");
+    let (truth, _) = omniwarp::image_io::read_exr_rgba(&caps.join("truth.exr")).unwrap();
+    assert!(truth.data.iter().filter(|p| p[3] == 1.0).count() > 100_000);
+    let camera = caps.join("camera.json");
+    let channel = dir.path().join("front.json");
+    let (ok, _, err) = run(&[
+        "calibrate",
+        "--captures",
+        caps_s,
+        "--camera",
+        camera.to_str().unwrap(),
+        "--rig",
+        rig,
+        "--channel",
+        "front",
+        "--model",
+        "LENSMODEL_OPENCV4",
+        "--out",
+        channel.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let doc: ChannelDoc =
+        serde_json::from_str(&std::fs::read_to_string(&channel).unwrap()).unwrap();
+    let fitted = Channel::from_doc(&doc, "").unwrap();
+    let truth = dome().channel("front").unwrap().clone();
+    assert!((fitted.position - truth.position).length() < 0.002);
+
+    let residuals = dir.path().join("residuals.exr");
+    let check_args = |channel: &'static str| {
+        vec![
+            "calibrate".to_string(),
+            "--captures".into(),
+            caps_s.into(),
+            "--camera".into(),
+            camera.to_str().unwrap().into(),
+            "--rig".into(),
+            rig.into(),
+            "--channel".into(),
+            channel.into(),
+            "--check".into(),
+            residuals.to_str().unwrap().into(),
+        ]
+    };
+    let a = check_args("front");
+    let (ok, out, err) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{err}");
+    assert!(out.ends_with("not moved\n"), "{out}");
+    let (img, _) = omniwarp::image_io::read_exr_rgba(&residuals).unwrap();
+    assert_eq!((img.width, img.height), (1280, 720));
+    assert!(img.data.iter().filter(|p| p[3] == 1.0).count() > 50_000);
+    // The same captures checked against another projector: that one "moved".
+    let a = check_args("left");
+    let (ok, out, _) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok && out.ends_with(": moved\n"), "{out}");
+
+    // Conditions no camera has are refused by name.
+    let (ok, _, err) = run(&["simulate", "--rig", rig, "--noise=-1", "--out", caps_s]);
+    assert!(
+        !ok && err.contains("--noise: must lie within 0–64, got -1"),
+        "{err}"
+    );
+
+    // A frame missing: the error says how many there should be.
+    std::fs::remove_file(caps.join("057.png")).unwrap();
+    let (ok, _, err) = run(&[
+        "calibrate",
+        "--captures",
+        caps_s,
+        "--camera",
+        camera.to_str().unwrap(),
+        "--rig",
+        rig,
+        "--channel",
+        "front",
+        "--out",
+        channel.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("has 58 frames, got 57"), "{err}");
+}
