@@ -313,7 +313,7 @@ impl BenchConditions {
         omniwarp::rig::Channel,
         omniwarp::structured::bench::BenchOptions,
     )> {
-        use omniwarp::rig::{Channel, ChannelDoc, Rig};
+        use omniwarp::rig::Rig;
         let rig = Rig::read(&self.rig).with_context(|| format!("--rig {}", self.rig.display()))?;
         let projector = match &self.channel {
             Some(id) => rig
@@ -323,20 +323,7 @@ impl BenchConditions {
         }
         .clone();
         let camera = match &self.camera {
-            Some(path) => {
-                let text = std::fs::read_to_string(path)
-                    .with_context(|| format!("--camera {}", path.display()))?;
-                let de = &mut serde_json::Deserializer::from_str(&text);
-                let doc: ChannelDoc = serde_path_to_error::deserialize(de).map_err(|e| {
-                    anyhow::anyhow!(
-                        "--camera: {}: {}",
-                        omniwarp::rig::pointer_of(&e.path().to_string()),
-                        e.inner()
-                    )
-                })?;
-                Channel::from_doc(&doc, "")
-                    .map_err(|e| anyhow::anyhow!("--camera: {}", named(e)))?
-            }
+            Some(path) => read_camera(path)?,
             None => omniwarp::structured::bench::fisheye_at_eye(
                 &rig,
                 &projector,
@@ -364,4 +351,20 @@ impl BenchConditions {
         })?;
         Ok((rig, projector, camera, opts))
     }
+}
+
+/// `--camera`: a camera as a rig channel document, errors naming the flag and the field.
+pub fn read_camera(path: &Path) -> Result<omniwarp::rig::Channel> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("--camera {}", path.display()))?;
+    let de = &mut serde_json::Deserializer::from_str(&text);
+    let doc: omniwarp::rig::ChannelDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+        anyhow::anyhow!(
+            "--camera: {}: {}",
+            omniwarp::rig::pointer_of(&e.path().to_string()),
+            e.inner()
+        )
+    })?;
+    omniwarp::rig::Channel::from_doc(&doc, "")
+        .map_err(|e| anyhow::anyhow!("--camera: {}", named(e)))
 }

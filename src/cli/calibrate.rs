@@ -1,6 +1,6 @@
 //! `omniwarp calibrate`: measured correspondences in, a rig channel out.
 
-use super::args::named;
+use super::args::{named, read_camera};
 use anyhow::{Context, Result};
 use clap::Args;
 use omniwarp::calibration::{CorrespondencesDoc, ModelChoice, calibrate};
@@ -142,7 +142,7 @@ fn write_channel(
 
 /// `--captures`: decode, then calibrate or check.
 fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
-    use omniwarp::rig::{Channel, ChannelDoc, Rig};
+    use omniwarp::rig::Rig;
     use omniwarp::structured::decode::{DecodeOptions, decode};
     use omniwarp::structured::{PatternSet, calibrate_captures, check, read_captures};
     let rig_path = a.rig.as_ref().expect("clap requires it");
@@ -151,19 +151,7 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     let projector = rig
         .channel(id)
         .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?;
-    let camera_path = a.camera.as_ref().expect("clap requires it");
-    let text = std::fs::read_to_string(camera_path)
-        .with_context(|| format!("--camera {}", camera_path.display()))?;
-    let de = &mut serde_json::Deserializer::from_str(&text);
-    let doc: ChannelDoc = serde_path_to_error::deserialize(de).map_err(|e| {
-        anyhow::anyhow!(
-            "--camera: {}: {}",
-            omniwarp::rig::pointer_of(&e.path().to_string()),
-            e.inner()
-        )
-    })?;
-    let camera =
-        Channel::from_doc(&doc, "").map_err(|e| anyhow::anyhow!("--camera: {}", named(e)))?;
+    let camera = read_camera(a.camera.as_ref().expect("clap requires it"))?;
     let frames = read_captures(dir).map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
     let resolution = [projector.width, projector.height];
     let opts = DecodeOptions::default();
