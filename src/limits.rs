@@ -46,6 +46,10 @@ pub const ZOOM: (f64, f64) = (1e-3, 1e3);
 /// Largest mesh screen file (and upload), bytes, and its triangles.
 pub const MESH_BYTES: u64 = 64 << 20;
 pub const MESH_TRIANGLES: usize = 4_000_000;
+/// Largest camera capture upload (one frame, PNG or JPEG), bytes.
+pub const CAPTURE_BODY: u64 = 64 << 20;
+/// Camera captures the daemon holds at once over all channels, bytes (one byte per pixel).
+pub const CAPTURE_BYTES: usize = 1 << 30;
 /// Lines or values in a lens file, a PFM or a Bourke mesh, as a reader accepts them.
 pub const FILE_VALUES: u64 = 1 << 26;
 

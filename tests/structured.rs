@@ -9,6 +9,8 @@ use omniwarp::structured::decode::{DecodeOptions, Decoded, decode};
 use omniwarp::structured::{Grey, check, correspondences};
 use std::path::Path;
 
+mod common;
+
 fn dome() -> Rig {
     Rig::read(Path::new("calibration/rigs/dome-180-tilt15-5proj.json")).unwrap()
 }
@@ -364,4 +366,105 @@ fn simulated_captures_calibrate_and_check_from_the_command_line() {
         channel.to_str().unwrap(),
     ]);
     assert!(!ok && err.contains("has 58 frames, got 57"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
+    use axum::body::Body;
+    use axum::http::{Request, StatusCode, header};
+    use common::server::{call, get, json, state_with, write};
+    let text = std::fs::read_to_string("calibration/rigs/dome-180-tilt15-5proj.json").unwrap();
+    let s = state_with(None, None, omniwarp::rig::RigDoc::parse(&text).unwrap());
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    let camera = omniwarp::structured::bench::fisheye_at_eye(&rig, &projector, 1280, 720).unwrap();
+    let bench = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let put = |n: String, ct: &str, body: Vec<u8>| {
+        Request::put(format!("/v1/channels/front/captures/{n}"))
+            .header(header::CONTENT_TYPE, ct)
+            .body(Body::from(body))
+            .unwrap()
+    };
+    let decode_req = |check: bool| {
+        let body = serde_json::json!({"camera": camera.doc(), "model": "LENSMODEL_OPENCV4",
+            "check": check});
+        write(
+            "POST",
+            "/v1/channels/front/captures",
+            None,
+            body.to_string(),
+        )
+    };
+    let png = |n: usize| bench.capture(n).unwrap().png().unwrap();
+    for n in 0..57 {
+        let (st, _, body) = call(&s, put(n.to_string(), "image/png", png(n))).await;
+        assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    }
+    let (_, _, body) = call(&s, get("/v1/channels/front/captures")).await;
+    let status = json(&body);
+    assert_eq!(status["frames"], 58);
+    assert_eq!(status["missing"], serde_json::json!([57]));
+    assert_eq!(status["size"], serde_json::json!([1280, 720]));
+    let (st, _, body) = call(&s, decode_req(false)).await;
+    assert_eq!(st, StatusCode::BAD_REQUEST);
+    assert_eq!(json(&body)["field"], "captures");
+    assert!(json(&body)["error"].as_str().unwrap().contains("[57]"));
+
+    // Refused uploads, each named.
+    let (st, _, _) = call(&s, put("57".into(), "text/plain", png(57))).await;
+    assert_eq!(st, StatusCode::UNSUPPORTED_MEDIA_TYPE);
+    for (n, body, field) in [
+        ("57", b"not an image".to_vec(), "body"),
+        ("58", png(0), "n"),
+        ("x", png(0), "n"),
+        (
+            "57",
+            omniwarp::structured::Grey {
+                width: 8,
+                height: 8,
+                data: vec![0; 64],
+            }
+            .png()
+            .unwrap(),
+            "body",
+        ),
+    ] {
+        let (st, _, resp) = call(&s, put(n.into(), "image/png", body)).await;
+        assert_eq!(
+            (st, json(&resp)["field"].as_str()),
+            (StatusCode::BAD_REQUEST, Some(field)),
+            "{n}"
+        );
+    }
+
+    let (st, _, _) = call(&s, put("57".into(), "image/png", png(57))).await;
+    assert_eq!(st, StatusCode::OK);
+    let (st, _, body) = call(&s, decode_req(false)).await;
+    assert_eq!(
+        st,
+        StatusCode::CREATED,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    let proposal = json(&body);
+    let doc: ChannelDoc = serde_json::from_value(proposal["proposed"].clone()).unwrap();
+    let fitted = Channel::from_doc(&doc, "").unwrap();
+    assert!((fitted.position - projector.position).length() < 0.002);
+    let (st, _, body) = call(&s, get(&format!("/v1/proposals/{}", proposal["id"]))).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+
+    let (st, _, body) = call(&s, decode_req(true)).await;
+    assert_eq!(st, StatusCode::OK);
+    let report = json(&body);
+    assert_eq!(report["moved"], false, "{report}");
+    assert!(report["count"].as_u64().unwrap() > 50_000, "{report}");
+
+    let (_, _, body) = call(
+        &s,
+        write("DELETE", "/v1/channels/front/captures", None, String::new()),
+    )
+    .await;
+    assert_eq!(json(&body)["dropped"], 58);
+    let (st, _, _) = call(&s, decode_req(true)).await;
+    assert_eq!(st, StatusCode::BAD_REQUEST);
 }

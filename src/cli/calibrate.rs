@@ -202,6 +202,7 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         choice,
         a.points,
         &opts,
+        &Default::default(),
     )
     .map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
     eprintln!(

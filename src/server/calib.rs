@@ -37,15 +37,26 @@ pub async fn propose(
         })
     })
     .await?;
+    offer(&s, &id, rig_revision, resolution, &cal).await
+}
+
+/// Keeps a calibration as a proposal (durably, announced on the feed) and answers 201 with it.
+pub async fn offer(
+    s: &Arc<AppState>,
+    id: &str,
+    rig_revision: u64,
+    resolution: [u32; 2],
+    cal: &crate::calibration::Calibration,
+) -> Result<Response, ApiError> {
     let pid = s
         .store
         .next_proposal
         .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let proposal = Proposal {
         id: pid,
-        channel: id.clone(),
+        channel: id.to_string(),
         rig_revision,
-        proposed: cal.channel_doc(&id, resolution),
+        proposed: cal.channel_doc(id, resolution),
         rms: cal.fit.rms,
         considered: cal
             .considered

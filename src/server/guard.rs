@@ -121,6 +121,13 @@ fn is_json(ct: Option<&str>) -> bool {
         .is_some_and(|m| m.trim().eq_ignore_ascii_case("application/json"))
 }
 
+fn is_image(ct: Option<&str>) -> bool {
+    ct.and_then(|c| c.split(';').next()).is_some_and(|m| {
+        let m = m.trim();
+        m.eq_ignore_ascii_case("image/png") || m.eq_ignore_ascii_case("image/jpeg")
+    })
+}
+
 /// Host, Origin, content type, sizes and CORS; then the body, read whole.
 pub async fn guard(
     State(s): State<Arc<AppState>>,
@@ -170,10 +177,17 @@ pub async fn guard(
     if req.method() == Method::OPTIONS {
         return Ok(preflight(cors));
     }
-    // Mesh uploads are OBJ text of their own size; every other body is JSON.
-    let is_mesh = req.uri().path().starts_with("/v1/meshes/");
+    // Mesh uploads are OBJ text of their own size, camera captures images of theirs; every
+    // other body is JSON.
+    let path = req.uri().path();
+    let is_mesh = path.starts_with("/v1/meshes/");
+    let is_capture = req.method() == Method::PUT
+        && path.starts_with("/v1/channels/")
+        && path.rsplit('/').nth(1) == Some("captures");
     let limit = if is_mesh {
         crate::limits::MESH_BYTES as usize
+    } else if is_capture {
+        crate::limits::CAPTURE_BODY as usize
     } else {
         MAX_BODY
     };
@@ -185,7 +199,14 @@ pub async fn guard(
     }
     // A body of unknown length (chunked) counts as one; an empty one does not.
     let has_body = axum::body::HttpBody::size_hint(req.body()).exact() != Some(0);
-    if has_body && !is_mesh && !is_json(header_str(h, header::CONTENT_TYPE)?) {
+    if has_body && is_capture && !is_image(header_str(h, header::CONTENT_TYPE)?) {
+        return Err(ApiError::refused(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            Some("Content-Type"),
+            "a capture must be sent as image/png or image/jpeg",
+        ));
+    }
+    if has_body && !is_mesh && !is_capture && !is_json(header_str(h, header::CONTENT_TYPE)?) {
         return Err(ApiError::refused(
             StatusCode::UNSUPPORTED_MEDIA_TYPE,
             Some("Content-Type"),

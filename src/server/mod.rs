@@ -7,6 +7,7 @@
 mod cache;
 mod calib;
 mod canvas;
+mod captures;
 mod channels;
 pub mod client;
 mod console;
@@ -94,6 +95,10 @@ routes! {
     "/v1/channels/{id}/show" => get(show::get_show).put(show::put_show);
     "/v1/channels/{id}/output.png" => get(show::output);
     "/v1/channels/{id}/pattern/{n}" => get(show::pattern);
+    "/v1/channels/{id}/captures" => get(captures::get_captures)
+        .post(captures::post_captures)
+        .delete(captures::delete_captures);
+    "/v1/channels/{id}/captures/{n}" => put(captures::put_capture);
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
     "/v1/meshes" => get(meshes::list);

@@ -9,6 +9,7 @@ use super::cache::{Computed, Geometry, GpuWarp};
 use super::db::Meta;
 use super::store::Store;
 use crate::content::testcard::Card;
+use crate::structured::Grey;
 use axum::Json;
 use axum::body::Bytes;
 use axum::http::{HeaderMap, HeaderValue, header};
@@ -92,6 +93,8 @@ pub struct AppState {
     pub keeper: super::keep::Keeper,
     /// What each channel shows: its content or a test card.
     pub shows: Shows,
+    /// Camera captures uploaded for calibration.
+    pub captures: Captures,
 }
 
 impl AppState {
@@ -124,6 +127,7 @@ impl AppState {
             scene_previews: Default::default(),
             keeper: Default::default(),
             shows: Default::default(),
+            captures: Default::default(),
         })
     }
 
@@ -158,6 +162,94 @@ impl Shows {
         }
         *entry = (entry.0 + 1, card);
         Ok(entry.0)
+    }
+}
+
+/// Camera captures uploaded per channel (see `captures.rs`), frame by frame, held in memory
+/// until they are decoded or dropped: a capture session lasts minutes, and the captures of a
+/// fresh session replace it.
+#[derive(Default)]
+pub struct Captures(Mutex<HashMap<String, Vec<Option<Arc<Grey>>>>>);
+
+impl Captures {
+    /// Keeps frame `n` of a `len`-frame sequence for channel `id`. Every frame of a channel
+    /// must have the first one's size; all channels together hold at most
+    /// [`crate::limits::CAPTURE_BYTES`].
+    pub fn put(&self, id: &str, n: usize, len: usize, frame: Grey) -> Result<(), ApiError> {
+        let mut map = self.0.lock().expect("captures lock");
+        let held: usize = map
+            .iter()
+            .filter(|(k, _)| k.as_str() != id)
+            .flat_map(|(_, v)| v.iter().flatten())
+            .map(|g| g.data.len())
+            .sum();
+        let frames = map.entry(id.to_string()).or_default();
+        frames.resize(len, None);
+        if let Some(first) = frames
+            .iter()
+            .enumerate()
+            .find_map(|(k, f)| f.as_ref().filter(|_| k != n))
+            && (first.width, first.height) != (frame.width, frame.height)
+        {
+            return Err(ApiError::Invalid {
+                field: "body".into(),
+                reason: format!(
+                    "is {}×{}, the channel's other captures {}×{} (DELETE the captures to start \
+                     again with another camera)",
+                    frame.width, frame.height, first.width, first.height
+                ),
+            });
+        }
+        let mine: usize = frames
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| *k != n)
+            .flat_map(|(_, f)| f.iter())
+            .map(|g| g.data.len())
+            .sum();
+        let limit = crate::limits::CAPTURE_BYTES;
+        if held + mine + frame.data.len() > limit {
+            return Err(ApiError::Invalid {
+                field: "body".into(),
+                reason: format!(
+                    "the daemon holds captures up to {} MiB in all; decode or DELETE some first",
+                    limit >> 20
+                ),
+            });
+        }
+        frames[n] = Some(Arc::new(frame));
+        Ok(())
+    }
+
+    /// Frame numbers received for a `len`-frame sequence, and their size.
+    pub fn status(&self, id: &str, len: usize) -> (Vec<usize>, Option<[u32; 2]>) {
+        let map = self.0.lock().expect("captures lock");
+        let frames = map.get(id).map(Vec::as_slice).unwrap_or(&[]);
+        let got: Vec<usize> = (0..len)
+            .filter(|&n| frames.get(n).is_some_and(Option::is_some))
+            .collect();
+        let size = frames.iter().flatten().next().map(|g| [g.width, g.height]);
+        (got, size)
+    }
+
+    /// All `len` frames, or the numbers of those missing.
+    pub fn all(&self, id: &str, len: usize) -> Result<Vec<Arc<Grey>>, Vec<usize>> {
+        let map = self.0.lock().expect("captures lock");
+        let frames = map.get(id).map(Vec::as_slice).unwrap_or(&[]);
+        let missing: Vec<usize> = (0..len)
+            .filter(|&n| !frames.get(n).is_some_and(Option::is_some))
+            .collect();
+        if missing.is_empty() {
+            Ok(frames[..len].iter().flatten().cloned().collect())
+        } else {
+            Err(missing)
+        }
+    }
+
+    /// Drops channel `id`'s captures; how many there were.
+    pub fn clear(&self, id: &str) -> usize {
+        let mut map = self.0.lock().expect("captures lock");
+        map.remove(id).map_or(0, |v| v.iter().flatten().count())
     }
 }
 

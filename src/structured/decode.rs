@@ -4,6 +4,7 @@
 use super::{Axis, Grey, PERIOD, PatternSet, STEPS, step_angle};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
+use std::borrow::Borrow;
 use std::f64::consts::TAU;
 
 /// When a pixel counts as decoded.
@@ -86,7 +87,12 @@ enum Fail {
 }
 
 /// Decodes one capture per frame of `set`, in its order.
-pub fn decode(set: &PatternSet, frames: &[Grey], opts: &DecodeOptions) -> Result<Decoded> {
+pub fn decode<F: Borrow<Grey> + Sync>(
+    set: &PatternSet,
+    frames: &[F],
+    opts: &DecodeOptions,
+) -> Result<Decoded> {
+    let frames: Vec<&Grey> = frames.iter().map(Borrow::borrow).collect();
     if frames.len() != set.len() {
         return Err(Error::invalid(
             "captures",

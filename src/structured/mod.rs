@@ -61,10 +61,23 @@ impl Grey {
     /// Reads a PNG or JPEG of any colour type as luma (Rec. 709 weights, as the `image`
     /// crate converts). `field` names the input in errors.
     pub fn decode(bytes: &[u8], field: &str) -> Result<Grey> {
-        let img = image::load_from_memory(bytes)
-            .map_err(|e| Error::invalid(field, format!("is not a PNG or JPEG image: {e}")))?;
-        let (w, h) = (img.width(), img.height());
+        let bad = |e: image::ImageError| {
+            Error::invalid(field, format!("is not a PNG or JPEG image: {e}"))
+        };
+        let reader = || {
+            image::ImageReader::new(std::io::Cursor::new(bytes))
+                .with_guessed_format()
+                .map_err(|e| Error::invalid(field, e.to_string()))
+        };
+        // The header first: a small file may claim an image too large to allocate.
+        let (w, h) = reader()?.into_dimensions().map_err(bad)?;
         crate::limits::at_most(field, (w as usize) * (h as usize), CAPTURE_PIXELS)?;
+        let mut r = reader()?;
+        let mut limits = image::Limits::default();
+        // Room for a 16-bit RGBA decode of the pixels the header declared.
+        limits.max_alloc = Some(u64::from(w) * u64::from(h) * 8 + (1 << 20));
+        r.limits(limits);
+        let img = r.decode().map_err(bad)?;
         Ok(Grey {
             width: w,
             height: h,
@@ -292,18 +305,20 @@ pub struct FromCaptures {
 
 /// Decodes `frames` (the sequence of a `resolution` projector, in order), turns at most
 /// `points` decoded pixels into correspondences through `camera` (pose known) onto `screen`,
-/// and calibrates.
-pub fn calibrate_captures(
+/// and calibrates, until `cancel` is set.
+#[allow(clippy::too_many_arguments)]
+pub fn calibrate_captures<F: std::borrow::Borrow<Grey> + Sync>(
     resolution: [u32; 2],
-    frames: &[Grey],
+    frames: &[F],
     camera: &crate::rig::Channel,
     screen: &crate::surface::Screen,
     choice: crate::calibration::ModelChoice,
     points: usize,
     opts: &decode::DecodeOptions,
+    cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<FromCaptures> {
     let set = PatternSet::new(resolution[0], resolution[1])?;
-    if let Some(f) = frames.first()
+    if let Some(f) = frames.first().map(std::borrow::Borrow::borrow)
         && (f.width, f.height) != (camera.width, camera.height)
     {
         return Err(Error::invalid(
@@ -333,7 +348,7 @@ pub fn calibrate_captures(
         lens: None,
         intrinsics_fixed: false,
     };
-    let calibration = crate::calibration::calibrate(&problem, choice)?;
+    let calibration = crate::calibration::calibrate_unless(&problem, choice, cancel)?;
     Ok(FromCaptures {
         decoded,
         problem,

@@ -56,6 +56,7 @@ pub fn run(a: CameraBenchArgs) -> Result<()> {
         choice,
         a.points,
         &DecodeOptions::default(),
+        &Default::default(),
     )
     .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     let t_solve = t.elapsed();

@@ -1,0 +1,178 @@
+//! Camera calibration over HTTP. While the channel shows frame n of its structured-light
+//! sequence (`GET …/pattern/{n}`), the camera's image of it is uploaded as
+//! `PUT …/captures/{n}`; once every frame is in, `POST …/captures` with the camera (its pose
+//! known) decodes them and either proposes a calibration, like the correspondences route, or
+//! checks the channel's current one and says whether the projector moved.
+
+use super::ApiError;
+use super::calib::offer;
+use super::jobs::run_job;
+use super::state::{AppState, parse_body};
+use crate::calibration::ModelChoice;
+use crate::rig::{Channel, ChannelDoc};
+use crate::structured::decode::{DecodeOptions, decode};
+use crate::structured::{Grey, PatternSet, calibrate_captures, check};
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::{Path, State};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use std::sync::Arc;
+
+/// The channel's pattern sequence; 404 for an id the rig does not have.
+fn sequence(s: &AppState, id: &str) -> Result<PatternSet, ApiError> {
+    let (rig, _) = s.store.snapshot();
+    let ch = rig
+        .channels
+        .iter()
+        .find(|c| c.id == id)
+        .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
+    Ok(PatternSet::new(ch.width, ch.height)?)
+}
+
+fn status(s: &AppState, id: &str, set: &PatternSet) -> serde_json::Value {
+    let (got, size) = s.captures.status(id, set.len());
+    let missing: Vec<usize> = (0..set.len()).filter(|n| !got.contains(n)).collect();
+    serde_json::json!({"frames": set.len(), "received": got, "missing": missing, "size": size})
+}
+
+pub async fn get_captures(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let set = sequence(&s, &id)?;
+    Ok(Json(status(&s, &id, &set)).into_response())
+}
+
+pub async fn delete_captures(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    sequence(&s, &id)?;
+    let dropped = s.captures.clear(&id);
+    Ok(Json(serde_json::json!({"dropped": dropped})).into_response())
+}
+
+pub async fn put_capture(
+    State(s): State<Arc<AppState>>,
+    Path((id, n)): Path<(String, String)>,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let set = sequence(&s, &id)?;
+    let n: usize = n.parse().map_err(|_| ApiError::Invalid {
+        field: "n".into(),
+        reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
+    })?;
+    set.frame(n, "n")?;
+    let grey = run_job(&s, move |_| Ok(Grey::decode(&body, "body")?)).await?;
+    s.captures.put(&id, n, set.len(), grey)?;
+    Ok(Json(status(&s, &id, &set)).into_response())
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DecodeBody {
+    /// The camera that took the captures, its pose known.
+    camera: ChannelDoc,
+    /// `auto` (default) or a lens model name.
+    #[serde(default)]
+    model: Option<String>,
+    /// Decoded pixels used as correspondences, at most.
+    #[serde(default = "default_points")]
+    points: usize,
+    /// Compare with the channel's current calibration instead of proposing one.
+    #[serde(default)]
+    check: bool,
+}
+
+fn default_points() -> usize {
+    5000
+}
+
+pub async fn post_captures(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let b: DecodeBody = parse_body(&body)?;
+    let set = sequence(&s, &id)?;
+    let camera = Channel::from_doc(&b.camera, "/camera")?;
+    crate::limits::at_most("/points", b.points, crate::limits::CALIBRATION_POINTS)?;
+    let choice = match b.model.as_deref().unwrap_or("auto") {
+        "auto" => ModelChoice::Auto,
+        m => ModelChoice::Fixed(m.parse().map_err(|e: crate::Error| ApiError::Invalid {
+            field: "/model".into(),
+            reason: e.reason(),
+        })?),
+    };
+    let frames = s
+        .captures
+        .all(&id, set.len())
+        .map_err(|missing| ApiError::Invalid {
+            field: "captures".into(),
+            reason: format!(
+                "{} of the {} frames are missing: {missing:?} (PUT …/captures/{{n}})",
+                missing.len(),
+                set.len()
+            ),
+        })?;
+    if let Some(f) = frames.first()
+        && (f.width, f.height) != (camera.width, camera.height)
+    {
+        return Err(ApiError::Invalid {
+            field: "/camera/resolution".into(),
+            reason: format!(
+                "is {}×{}, the captures {}×{}",
+                camera.width, camera.height, f.width, f.height
+            ),
+        });
+    }
+    let (rig, rig_revision) = s.store.snapshot();
+    let projector = rig
+        .channel(&id)
+        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
+        .clone();
+    let opts = DecodeOptions::default();
+    if b.check {
+        let screen = rig.doc.screen.clone();
+        let report = run_job(&s, move |_| {
+            let decoded = decode(&set, &frames, &opts)?;
+            let c = check(&decoded, &camera, &screen, &projector);
+            Ok(serde_json::json!({
+                "count": c.count,
+                "p50": finite(c.p50), "p95": finite(c.p95), "max": finite(c.max),
+                "threshold": c.threshold,
+                "moved": c.moved,
+                "rejected": rejected(&decoded.rejected),
+            }))
+        })
+        .await?;
+        return Ok(Json(report).into_response());
+    }
+    let resolution = [projector.width, projector.height];
+    let screen = rig.doc.screen.clone();
+    let found = run_job(&s, move |cancel| {
+        calibrate_captures(
+            resolution, &frames, &camera, &screen, choice, b.points, &opts, cancel,
+        )
+        .map_err(|e| match e {
+            crate::Error::Invalid { name, reason } => ApiError::Invalid {
+                field: name,
+                reason,
+            },
+            other => other.into(),
+        })
+    })
+    .await?;
+    offer(&s, &id, rig_revision, resolution, &found.calibration).await
+}
+
+/// JSON has no NaN: a figure over no pixels is null.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+fn rejected(r: &crate::structured::decode::Rejected) -> serde_json::Value {
+    serde_json::json!({"dark": r.dark, "flat": r.flat, "inconsistent": r.inconsistent,
+        "outside": r.outside, "noisy": r.noisy, "edge": r.edge})
+}
