@@ -65,6 +65,42 @@ fn pinhole(w: u32, h: u32, f: f64, look_to: [f64; 3]) -> Channel {
     Channel::from_doc(&doc, "/camera").unwrap()
 }
 
+/// Eight fiducials on the dome where a 1280×720 fisheye camera from the eye sees them, as
+/// someone would click them: to 0.3 px.
+fn markers(rig: &Rig, truth: &Channel) -> Vec<omniwarp::calibration::Correspondence> {
+    use omniwarp::calibration::Correspondence;
+    let mut noise = [
+        0.21, -0.3, 0.05, 0.28, -0.12, -0.25, 0.3, -0.07, 0.17, 0.0, -0.2, 0.1,
+    ]
+    .into_iter()
+    .cycle();
+    [
+        (360.0, 250.0),
+        (920.0, 250.0),
+        (640.0, 60.0),
+        (490.0, 150.0),
+        (790.0, 150.0),
+        (500.0, 340.0),
+        (780.0, 340.0),
+        (640.0, 380.0),
+    ]
+    .iter()
+    .map(|&(x, y)| {
+        let ray = truth.rotation * truth.lens.unproject([x, y]).unwrap();
+        let world = rig
+            .doc
+            .screen
+            .intersect(truth.position, ray)
+            .point()
+            .unwrap();
+        Correspondence {
+            pixel: [x + noise.next().unwrap(), y + noise.next().unwrap()],
+            world: world.to_array(),
+        }
+    })
+    .collect()
+}
+
 fn percentile(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     v[((v.len() - 1) as f64 * p).round() as usize]
@@ -453,6 +489,40 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
     let (st, _, body) = call(&s, get(&format!("/v1/proposals/{}", proposal["id"]))).await;
     assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
 
+    // The camera's pose from markers instead: the camera document's own pose is wrong.
+    let mut lost = camera.clone();
+    lost.position = glam::DVec3::new(0.3, -0.2, 0.1);
+    let body = serde_json::json!({"camera": lost.doc(), "model": "LENSMODEL_OPENCV4",
+        "markers": markers(&rig, &camera)});
+    let req = write(
+        "POST",
+        "/v1/channels/front/captures",
+        None,
+        body.to_string(),
+    );
+    let (st, _, body) = call(&s, req).await;
+    assert_eq!(
+        st,
+        StatusCode::CREATED,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    let doc: ChannelDoc = serde_json::from_value(json(&body)["proposed"].clone()).unwrap();
+    let fitted = Channel::from_doc(&doc, "").unwrap();
+    assert!((fitted.position - projector.position).length() < 0.005);
+    let body = serde_json::json!({"camera": lost.doc(), "markers": []});
+    let req = write(
+        "POST",
+        "/v1/channels/front/captures",
+        None,
+        body.to_string(),
+    );
+    let (st, _, body) = call(&s, req).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/markers"))
+    );
+
     let (st, _, body) = call(&s, decode_req(true)).await;
     assert_eq!(st, StatusCode::OK);
     let report = json(&body);
@@ -467,4 +537,86 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
     assert_eq!(json(&body)["dropped"], 58);
     let (st, _, _) = call(&s, decode_req(true)).await;
     assert_eq!(st, StatusCode::BAD_REQUEST);
+}
+
+#[test]
+fn two_camera_poses_measure_the_dome_radius() {
+    use omniwarp::structured::triangulate::{fit_sphere, triangulate};
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    let target = rig.wall_point(&projector, [959.5, 599.5]).unwrap();
+    let camera = |x: f64| {
+        let position = glam::DVec3::new(x, 0.0, 0.2);
+        let mut c = pinhole(1280, 720, 700.0, (target - position).normalize().to_array());
+        c.position = position;
+        c
+    };
+    let opts = DecodeOptions::default();
+    let shoot = |c: &Channel| {
+        let bench = Bench::new(&rig, &projector, c, BenchOptions::default()).unwrap();
+        decode(bench.patterns(), &capture_all(&bench), &opts).unwrap()
+    };
+    let (ca, cb) = (camera(-0.5), camera(0.5));
+    let (da, db) = (shoot(&ca), shoot(&cb));
+    let points = triangulate((&da, &ca), (&db, &cb), [1920, 1200], 2, 0.01);
+    let (centre, radius) = fit_sphere(&points).unwrap();
+    let off: Vec<f64> = points.iter().map(|p| (p.length() - 3.0).abs()).collect();
+    let worst = off.iter().copied().fold(0.0, f64::max);
+    eprintln!(
+        "two cameras 1 m apart: {} wall points (worst {:.2} mm off the true dome); radius {radius:.5} m, \
+         centre {centre:.4?}",
+        points.len(),
+        worst * 1e3
+    );
+    assert!(points.len() > 20_000, "{}", points.len());
+    assert!((radius - 3.0).abs() <= 0.003, "radius {radius}");
+    assert!(centre.length() < 0.01, "centre {centre}");
+}
+
+#[test]
+fn a_camera_pose_from_eight_markers_calibrates_the_projector_as_well() {
+    use omniwarp::structured::camera_pose;
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    let truth = omniwarp::structured::bench::fisheye_at_eye(&rig, &projector, 1280, 720).unwrap();
+    let markers = markers(&rig, &truth);
+    // The camera as known before: its lens, and a pose that is wrong.
+    let mut guess = truth.clone();
+    guess.position = glam::DVec3::new(0.3, -0.2, 0.1);
+    guess.rotation = glam::DMat3::IDENTITY;
+    let (camera, rms) = camera_pose(&guess, &markers).unwrap();
+    let off = (camera.position - truth.position).length();
+    eprintln!(
+        "camera pose from 8 markers: {:.2} mm off, marker RMS {rms:.3} px",
+        off * 1e3
+    );
+    assert!(off < 0.005, "camera {off} m off");
+    assert!(camera_pose(&guess, &markers[..3]).is_err());
+
+    let bench = Bench::new(&rig, &projector, &truth, BenchOptions::default()).unwrap();
+    let decoded = decode(
+        bench.patterns(),
+        &capture_all(&bench),
+        &DecodeOptions::default(),
+    )
+    .unwrap();
+    let fitted = |camera: &Channel| {
+        let points = correspondences(&decoded, camera, &rig.doc.screen, 5000);
+        let problem = Problem {
+            resolution: [1920, 1200],
+            points,
+            lens: None,
+            intrinsics_fixed: false,
+        };
+        let cal = calibrate(&problem, ModelChoice::Fixed(projector.lens.model())).unwrap();
+        let ch = Channel::from_doc(&cal.channel_doc("front", [1920, 1200]), "").unwrap();
+        (ch.position - projector.position).length()
+    };
+    let (with_truth, with_markers) = (fitted(&truth), fitted(&camera));
+    eprintln!(
+        "projector position off by {:.2} mm with the true camera pose, {:.2} mm with the pose from markers",
+        with_truth * 1e3,
+        with_markers * 1e3
+    );
+    assert!(with_markers < 0.005, "{with_markers}");
 }

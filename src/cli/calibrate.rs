@@ -28,6 +28,11 @@ pub struct CalibrateArgs {
     /// The camera that took the captures, as a rig channel (JSON), its pose known.
     #[arg(long)]
     camera: Option<PathBuf>,
+    /// Markers that give the camera's pose instead of --camera's own (its lens is kept): JSON
+    /// {"points": [{"pixel": [u, v], "world": [x, y, z]}, …]}, wall points of known position
+    /// and the camera pixels where they appear; at least 4.
+    #[arg(long, requires = "captures")]
+    markers: Option<PathBuf>,
     /// The rig whose wall the camera looks at.
     #[arg(long)]
     rig: Option<PathBuf>,
@@ -151,7 +156,27 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     let projector = rig
         .channel(id)
         .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?;
-    let camera = read_camera(a.camera.as_ref().expect("clap requires it"))?;
+    let mut camera = read_camera(a.camera.as_ref().expect("clap requires it"))?;
+    if let Some(path) = &a.markers {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("--markers {}", path.display()))?;
+        let de = &mut serde_json::Deserializer::from_str(&text);
+        let doc: CorrespondencesDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+            anyhow::anyhow!(
+                "--markers: {}: {}",
+                omniwarp::rig::pointer_of(&e.path().to_string()),
+                e.inner()
+            )
+        })?;
+        let (posed, rms) = omniwarp::structured::camera_pose(&camera, &doc.points)
+            .map_err(|e| anyhow::anyhow!("--markers: {}", named(e)))?;
+        eprintln!(
+            "camera pose from {} markers: position {:?}, marker RMS {rms:.3} px",
+            doc.points.len(),
+            posed.position.to_array()
+        );
+        camera = posed;
+    }
     let frames = read_captures(dir).map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
     let resolution = [projector.width, projector.height];
     let opts = DecodeOptions::default();

@@ -80,6 +80,10 @@ struct DecodeBody {
     /// Decoded pixels used as correspondences, at most.
     #[serde(default = "default_points")]
     points: usize,
+    /// Wall points of known position and the camera pixels where they appear: the camera's
+    /// pose is solved from them (its lens kept) instead of taken from `camera`.
+    #[serde(default)]
+    markers: Option<Vec<crate::calibration::Correspondence>>,
     /// Compare with the channel's current calibration instead of proposing one.
     #[serde(default)]
     check: bool,
@@ -96,7 +100,23 @@ pub async fn post_captures(
 ) -> Result<Response, ApiError> {
     let b: DecodeBody = parse_body(&body)?;
     let set = sequence(&s, &id)?;
-    let camera = Channel::from_doc(&b.camera, "/camera")?;
+    let mut camera = Channel::from_doc(&b.camera, "/camera")?;
+    if let Some(markers) = &b.markers {
+        crate::limits::at_most("/markers", markers.len(), crate::limits::CALIBRATION_POINTS)?;
+        let (c, markers) = (camera.clone(), markers.clone());
+        camera = run_job(&s, move |_| {
+            crate::structured::camera_pose(&c, &markers)
+                .map(|(posed, _)| posed)
+                .map_err(|e| match e {
+                    crate::Error::Invalid { reason, .. } => ApiError::Invalid {
+                        field: "/markers".into(),
+                        reason,
+                    },
+                    other => other.into(),
+                })
+        })
+        .await?;
+    }
     crate::limits::at_most("/points", b.points, crate::limits::CALIBRATION_POINTS)?;
     let choice = match b.model.as_deref().unwrap_or("auto") {
         "auto" => ModelChoice::Auto,

@@ -24,6 +24,7 @@
 
 pub mod bench;
 pub mod decode;
+pub mod triangulate;
 
 use crate::error::{Error, Result};
 use std::f64::consts::TAU;
@@ -293,6 +294,38 @@ pub fn correspondences(
     }
     out.truncate(limit);
     out
+}
+
+/// The camera's pose from markers: wall points of known position (surveyed fiducials, a
+/// dome's seams) and the camera pixels where they appear, the camera's lens known. This is
+/// the projector calibration's own problem (resectioning) with the intrinsics held, so it
+/// needs no guess: a pose from the rays, refined under the robust loss. Returns the camera
+/// with its pose replaced, and the markers' RMS reprojection error in camera pixels.
+pub fn camera_pose(
+    camera: &crate::rig::Channel,
+    markers: &[crate::calibration::Correspondence],
+) -> Result<(crate::rig::Channel, f64)> {
+    if markers.len() < 4 {
+        return Err(Error::invalid(
+            "markers",
+            format!(
+                "a camera's pose needs at least 4 markers, got {}",
+                markers.len()
+            ),
+        ));
+    }
+    let problem = crate::calibration::Problem {
+        resolution: [camera.width, camera.height],
+        points: markers.to_vec(),
+        lens: Some(camera.lens.clone()),
+        intrinsics_fixed: true,
+    };
+    let cal = crate::calibration::calibrate(
+        &problem,
+        crate::calibration::ModelChoice::Fixed(camera.lens.model()),
+    )?;
+    let doc = cal.channel_doc(&camera.id, [camera.width, camera.height]);
+    Ok((crate::rig::Channel::from_doc(&doc, "markers")?, cal.fit.rms))
 }
 
 /// What a capture set made of a projector: the decoded map, the correspondences taken from
