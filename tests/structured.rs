@@ -378,6 +378,13 @@ fn simulated_captures_calibrate_and_check_from_the_command_line() {
     let a = check_args("left");
     let (ok, out, _) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok && out.ends_with(": moved\n"), "{out}");
+    // …and one whose image, as calibrated, none of the decoded light falls in.
+    let a = check_args("back");
+    let (ok, out, _) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(
+        ok && out.contains("within `back`'s image as calibrated: moved"),
+        "{out}"
+    );
 
     // Conditions no camera has are refused by name.
     let (ok, _, err) = run(&["simulate", "--rig", rig, "--noise=-1", "--out", caps_s]);

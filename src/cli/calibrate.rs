@@ -185,9 +185,9 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         let decoded = decode(&set, &frames, &opts)
             .map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
         let c = check(&decoded, &camera, &rig.doc.screen, projector);
-        if c.count == 0 {
+        if decoded.valid() == 0 {
             anyhow::bail!(
-                "--captures: no camera pixel was decoded on the wall (rejected: {:?})",
+                "--captures: no camera pixel was decoded (rejected: {:?})",
                 decoded.rejected
             );
         }
@@ -199,15 +199,22 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
                 None => [0.0; 4],
             });
         omniwarp::image_io::write_exr_rgba(out, &img, &[], omniwarp::image_io::Precision::Float)?;
-        outln!(
-            "{} pixels compared: median {:.4} px, p95 {:.4} px, max {:.4} px; threshold {:.4} px: {}",
-            c.count,
-            c.p50,
-            c.p95,
-            c.max,
-            c.threshold,
-            if c.moved { "moved" } else { "not moved" }
-        );
+        if c.count == 0 {
+            outln!(
+                "none of the {} decoded pixels lands within `{id}`'s image as calibrated: moved",
+                decoded.valid()
+            );
+        } else {
+            outln!(
+                "{} pixels compared: median {:.4} px, p95 {:.4} px, max {:.4} px; threshold {:.4} px: {}",
+                c.count,
+                c.p50,
+                c.p95,
+                c.max,
+                c.threshold,
+                if c.moved { "moved" } else { "not moved" }
+            );
+        }
         return Ok(());
     }
     let choice = match a.model.as_deref().unwrap_or("auto") {

@@ -20,7 +20,7 @@ use serde::Deserialize;
 use std::sync::Arc;
 
 /// The channel's pattern sequence; 404 for an id the rig does not have.
-fn sequence(s: &AppState, id: &str) -> Result<PatternSet, ApiError> {
+pub(super) fn sequence(s: &AppState, id: &str) -> Result<PatternSet, ApiError> {
     let (rig, _) = s.store.snapshot();
     let ch = rig
         .channels

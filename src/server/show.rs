@@ -12,7 +12,6 @@ use super::preview::Grid;
 use super::state::{AppState, Query, if_match, parse_body, tagged};
 use crate::content::testcard::{self, Card, Label};
 use crate::image_io::{Compression, png_bytes_with};
-use crate::structured::PatternSet;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;
@@ -117,19 +116,13 @@ pub async fn pattern(
     State(s): State<Arc<AppState>>,
     Path((id, n)): Path<(String, String)>,
 ) -> Result<Response, ApiError> {
-    let (rig, _) = s.store.snapshot();
-    let ch = rig
-        .channels
-        .iter()
-        .find(|c| c.id == id)
-        .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
-    let set = PatternSet::new(ch.width, ch.height)?;
+    let set = super::captures::sequence(&s, &id)?;
     let n: usize = n.parse().map_err(|_| ApiError::Invalid {
         field: "n".into(),
         reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
     })?;
     let frame = set.frame(n, "n")?;
-    let etag = format!("\"pattern-{}x{}-{n}\"", ch.width, ch.height);
+    let etag = format!("\"pattern-{}x{}-{n}\"", set.width, set.height);
     let png = run_job(&s, move |_| Ok(set.image(frame).png()?)).await?;
     outputs::file(&s, png, "image/png", &etag)
 }

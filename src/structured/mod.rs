@@ -430,6 +430,8 @@ pub struct Check {
     /// The median residual above which the projector is said to have moved: 0.15 px, or 4×
     /// the capture's own median predicted deviation where the capture is noisier.
     pub threshold: f64,
+    /// The median residual is above the threshold, or none of the decoded pixels lands
+    /// within the channel's reach as calibrated.
     pub moved: bool,
 }
 
@@ -437,7 +439,8 @@ pub struct Check {
 pub const MOVED_PX: f64 = 0.15;
 
 /// Compares a decoded capture with channel `projector` as calibrated: each decoded camera
-/// pixel's wall point (the camera's pose known) projected through the channel's model. A
+/// pixel's wall point (the camera's pose known) projected through the channel's model, where
+/// it lands within half an image of the channel's raster. A
 /// projector that moved or whose lens drifted shifts the whole map; noise moves single
 /// pixels, so the verdict is on the median.
 pub fn check(
@@ -464,11 +467,18 @@ pub fn check(
             else {
                 return None;
             };
-            let q = projector
-                .lens
-                .project(projector.rotation.transpose() * (point - projector.position))
-                .ok()?;
-            Some([s.q[0] - q[0], s.q[1] - q[1]])
+            // Behind the projector, or far outside its image, a lens formula still gives a
+            // pixel, but not one the projector could light: the channel as calibrated does not
+            // reach that wall point, and a residual there would measure the formula's
+            // extrapolation. Half an image beyond each edge is still compared.
+            let local = projector.rotation.transpose() * (point - projector.position);
+            if local.z <= 0.0 {
+                return None;
+            }
+            let q = projector.lens.project(local).ok()?;
+            let (w, h) = (f64::from(projector.width), f64::from(projector.height));
+            let near = (-w / 2.0..=1.5 * w).contains(&q[0]) && (-h / 2.0..=1.5 * h).contains(&q[1]);
+            near.then(|| [s.q[0] - q[0], s.q[1] - q[1]])
         })
         .collect();
     let mut size: Vec<f64> = residuals
@@ -496,7 +506,12 @@ pub fn check(
         p95: at(&size, 0.95),
         max: size.last().copied().unwrap_or(f64::NAN),
         threshold,
-        moved: p50 > threshold,
+        // Decoded light the calibration says the projector cannot reach at all: it moved.
+        moved: if size.is_empty() {
+            decoded.valid() > 0
+        } else {
+            p50 > threshold
+        },
         residuals,
     }
 }
