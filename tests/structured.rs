@@ -101,6 +101,19 @@ fn markers(rig: &Rig, truth: &Channel) -> Vec<omniwarp::calibration::Corresponde
     .collect()
 }
 
+/// The command line run: whether it succeeded, its stdout and its stderr.
+fn run(args: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 fn percentile(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     v[((v.len() - 1) as f64 * p).round() as usize]
@@ -300,17 +313,6 @@ fn simulated_captures_calibrate_and_check_from_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
     let caps = dir.path().join("captures");
     let rig = "calibration/rigs/dome-180-tilt15-5proj.json";
-    let run = |args: &[&str]| {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
-            .args(args)
-            .output()
-            .unwrap();
-        (
-            out.status.success(),
-            String::from_utf8_lossy(&out.stdout).into_owned(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
-    };
     let caps_s = caps.to_str().unwrap();
     let (ok, out, err) = run(&[
         "simulate",
@@ -386,6 +388,72 @@ fn simulated_captures_calibrate_and_check_from_the_command_line() {
         "{out}"
     );
 
+    // A check against a rig whose `front` is 2 cm off where it is: moved, and --out gets the
+    // channel re-fitted from the same captures, where the projector really is.
+    let drifted = dir.path().join("drifted.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rig).unwrap()).unwrap();
+    let x = &mut doc["channels"][0]["pose"]["position"][0];
+    *x = serde_json::json!(x.as_f64().unwrap() + 0.02);
+    std::fs::write(&drifted, doc.to_string()).unwrap();
+    let mut a = check_args("front");
+    a[6] = drifted.to_str().unwrap().into();
+    let refitted = dir.path().join("refitted.json");
+    a.extend(["--model", "LENSMODEL_OPENCV4", "--out"].map(String::from));
+    a.push(refitted.to_str().unwrap().into());
+    let (ok, out, err) = run(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok && out.contains(": moved\n"), "{out}{err}");
+    let doc: ChannelDoc =
+        serde_json::from_str(&std::fs::read_to_string(&refitted).unwrap()).unwrap();
+    let off = (Channel::from_doc(&doc, "").unwrap().position - truth.position).length();
+    assert!(off < 0.002, "re-fitted {off} m off");
+
+    // Any projector images through the same bench: the sequence's own first frames given as
+    // pictures are filmed to the same bytes as the sequence.
+    let patterns = dir.path().join("patterns");
+    std::fs::create_dir(&patterns).unwrap();
+    let set = omniwarp::structured::PatternSet::new(1920, 1200).unwrap();
+    for (n, frame) in set.frames().into_iter().take(6).enumerate() {
+        let png = set.image(frame).png().unwrap();
+        std::fs::write(patterns.join(format!("{n:03}.png")), png).unwrap();
+    }
+    let filmed = dir.path().join("filmed");
+    let film = |size: &str| {
+        run(&[
+            "simulate",
+            "--rig",
+            rig,
+            "--channel",
+            "front",
+            "--camera-size",
+            size,
+            "--patterns",
+            patterns.to_str().unwrap(),
+            "--out",
+            filmed.to_str().unwrap(),
+        ])
+    };
+    let (ok, out, err) = film("1280x720");
+    assert!(ok && out.starts_with("6 captures of `front`"), "{out}{err}");
+    for n in 0..6 {
+        let name = format!("{n:03}.png");
+        assert!(
+            std::fs::read(filmed.join(&name)).unwrap() == std::fs::read(caps.join(&name)).unwrap(),
+            "{name} differs"
+        );
+    }
+    let tiny = Grey {
+        width: 8,
+        height: 8,
+        data: vec![0; 64],
+    };
+    std::fs::write(patterns.join("006.png"), tiny.png().unwrap()).unwrap();
+    let (ok, _, err) = film("64x64");
+    assert!(
+        !ok && err.contains("--patterns: image 6 in name order is 8×8, `front` shows 1920×1200"),
+        "{err}"
+    );
+
     // Conditions no camera has are refused by name.
     let (ok, _, err) = run(&["simulate", "--rig", rig, "--noise=-1", "--out", caps_s]);
     assert!(
@@ -428,9 +496,9 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
             .body(Body::from(body))
             .unwrap()
     };
-    let decode_req = |check: bool| {
+    let refit_req = |check: bool, refit: bool| {
         let body = serde_json::json!({"camera": camera.doc(), "model": "LENSMODEL_OPENCV4",
-            "check": check});
+            "check": check, "refit": refit});
         write(
             "POST",
             "/v1/channels/front/captures",
@@ -438,6 +506,7 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
             body.to_string(),
         )
     };
+    let decode_req = |check: bool| refit_req(check, false);
     let png = |n: usize| bench.capture(n).unwrap().png().unwrap();
     for n in 0..57 {
         let (st, _, body) = call(&s, put(n.to_string(), "image/png", png(n))).await;
@@ -535,6 +604,43 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
     let report = json(&body);
     assert_eq!(report["moved"], false, "{report}");
     assert!(report["count"].as_u64().unwrap() > 50_000, "{report}");
+    assert!(report.get("proposal").is_none(), "{report}");
+
+    // A re-fit from the check's captures: none while the projector is where the rig says,
+    // refused without a check, and proposed once the rig no longer says where it is.
+    let (st, _, body) = call(&s, refit_req(true, true)).await;
+    assert_eq!(st, StatusCode::OK);
+    assert_eq!(
+        json(&body)["proposal"],
+        serde_json::Value::Null,
+        "{}",
+        json(&body)
+    );
+    let (st, _, body) = call(&s, refit_req(false, true)).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/refit"))
+    );
+    let (_, _, b) = call(&s, get("/v1/rig")).await;
+    let (mut doc, revision) = (json(&b)["rig"].clone(), json(&b)["revision"].as_u64());
+    let x = &mut doc["channels"][0]["pose"]["position"][0];
+    *x = serde_json::json!(x.as_f64().unwrap() + 0.02);
+    let (st, _, _) = call(&s, write("PUT", "/v1/rig", revision, doc.to_string())).await;
+    assert_eq!(st, StatusCode::OK);
+    let (st, _, body) = call(&s, refit_req(true, true)).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let report = json(&body);
+    assert_eq!(report["moved"], true, "{report}");
+    let doc: ChannelDoc = serde_json::from_value(report["proposal"]["proposed"].clone()).unwrap();
+    let refitted = Channel::from_doc(&doc, "").unwrap();
+    let off = (refitted.position - projector.position).length();
+    assert!(off < 0.002, "the re-fit is {off} m from the projector");
+    let (st, _, _) = call(
+        &s,
+        get(&format!("/v1/proposals/{}", report["proposal"]["id"])),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK);
 
     let (_, _, body) = call(
         &s,
@@ -626,4 +732,83 @@ fn a_camera_pose_from_eight_markers_calibrates_the_projector_as_well() {
         with_markers * 1e3
     );
     assert!(with_markers < 0.005, "{with_markers}");
+}
+
+#[test]
+fn two_cameras_measure_the_cylinder_from_the_command_line() {
+    // The cylinder example's centre projector filmed by two 1280×720 pinholes 1 m apart; the
+    // wall is then measured starting from a rig that has it wrong (radius 2.15 m instead of 2,
+    // axis leaning 3°, centre 9 cm off).
+    let dir = tempfile::tempdir().unwrap();
+    let rig = "calibration/rigs/cylinder-270-3proj.json";
+    let run = |args: &[&str]| {
+        let (ok, out, err) = run(args);
+        assert!(ok, "{err}");
+        out
+    };
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    for (name, x) in [("a", -0.5), ("b", 0.5)] {
+        let position = glam::DVec3::new(x, 0.0, 0.3);
+        let target = glam::DVec3::new(0.0, 0.1, -2.0);
+        let mut camera =
+            pinhole(1280, 720, 700.0, (target - position).normalize().to_array()).doc();
+        camera.pose.position = position.to_array();
+        let json = path(&format!("{name}.json"));
+        std::fs::write(&json, serde_json::to_string(&camera).unwrap()).unwrap();
+        let seed = if name == "a" { "1" } else { "2" };
+        run(&[
+            "simulate",
+            "--rig",
+            rig,
+            "--channel",
+            "centre",
+            "--camera",
+            &json,
+            "--seed",
+            seed,
+            "--out",
+            &path(name),
+        ]);
+    }
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rig).unwrap()).unwrap();
+    let lean = 3f64.to_radians();
+    doc["screen"]["radius"] = serde_json::json!(2.15);
+    doc["screen"]["axis"] = serde_json::json!([lean.sin(), lean.cos(), 0.0]);
+    doc["screen"]["centre"] = serde_json::json!([0.05, 0.0, -0.08]);
+    std::fs::write(path("wrong.json"), doc.to_string()).unwrap();
+    let out = run(&[
+        "measure",
+        "--rig",
+        &path("wrong.json"),
+        "--channel",
+        "centre",
+        "--captures",
+        &path("a"),
+        &path("b"),
+        "--camera",
+        &path("a.json"),
+        &path("b.json"),
+        "--out",
+        &path("measured.json"),
+    ]);
+    eprintln!("{out}");
+    let measured = Rig::read(Path::new(&path("measured.json"))).unwrap();
+    let omniwarp::surface::Screen::Cylinder(c) = &measured.doc.screen else {
+        panic!("{:?}", measured.doc.screen)
+    };
+    let axis = glam::DVec3::from_array(c.axis);
+    let centre = glam::DVec3::from_array(c.centre);
+    assert!((c.radius - 2.0).abs() < 0.002, "radius {}", c.radius);
+    assert!(
+        axis.angle_between(glam::DVec3::Y).to_degrees() < 0.05,
+        "axis {axis}"
+    );
+    assert!(
+        (centre - axis * centre.dot(axis)).length() < 0.005,
+        "centre {centre}"
+    );
+    // The rest of the rig is the rig's.
+    assert_eq!(measured.doc.channels.len(), 3);
+    assert_eq!(c.height, [-1.0, 1.2]);
 }

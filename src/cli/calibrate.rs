@@ -1,6 +1,7 @@
 //! `omniwarp calibrate`: measured correspondences in, a rig channel out.
 
 use super::args::{named, read_camera};
+use super::io::write_json;
 use anyhow::{Context, Result};
 use clap::Args;
 use omniwarp::calibration::{CorrespondencesDoc, ModelChoice, calibrate};
@@ -58,7 +59,8 @@ pub struct CalibrateArgs {
     /// Channel id written into the result.
     #[arg(long, default_value = "projector")]
     id: String,
-    /// The projector as a rig channel (JSON).
+    /// The projector as a rig channel (JSON). With --check: the channel re-fitted from the
+    /// same captures, written whatever the verdict.
     #[arg(long, required_unless_present = "check")]
     out: Option<PathBuf>,
 }
@@ -135,21 +137,16 @@ fn write_channel(
     resolution: [u32; 2],
     out: &std::path::Path,
 ) -> Result<()> {
-    let doc = cal.channel_doc(id, resolution);
-    let json = serde_json::to_string_pretty(&doc)?;
-    omniwarp::image_io::atomic_write(out, |f| {
-        use std::io::Write;
-        f.write_all(json.as_bytes())
-            .map_err(|e| omniwarp::Error::file(out, e))
-    })?;
-    Ok(())
+    write_json(out, &cal.channel_doc(id, resolution))
 }
 
 /// `--captures`: decode, then calibrate or check.
 fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     use omniwarp::rig::Rig;
     use omniwarp::structured::decode::{DecodeOptions, decode};
-    use omniwarp::structured::{PatternSet, calibrate_captures, check, read_captures};
+    use omniwarp::structured::{
+        PatternSet, calibrate_captures, calibrate_decoded, check, read_captures,
+    };
     let rig_path = a.rig.as_ref().expect("clap requires it");
     let rig = Rig::read(rig_path).with_context(|| format!("--rig {}", rig_path.display()))?;
     let id = a.channel.as_deref().expect("clap requires it");
@@ -177,6 +174,15 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         );
         camera = posed;
     }
+    let choice = match a.model.as_deref().unwrap_or("auto") {
+        "auto" => ModelChoice::Auto,
+        m => ModelChoice::Fixed(
+            m.parse()
+                .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", e.reason()))?,
+        ),
+    };
+    omniwarp::limits::at_most("--points", a.points, omniwarp::limits::CALIBRATION_POINTS)
+        .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     let frames = read_captures(dir).map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
     let resolution = [projector.width, projector.height];
     let opts = DecodeOptions::default();
@@ -215,17 +221,22 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
                 if c.moved { "moved" } else { "not moved" }
             );
         }
+        if let Some(out) = &a.out {
+            let found = calibrate_decoded(
+                decoded,
+                resolution,
+                &camera,
+                &rig.doc.screen,
+                choice,
+                a.points,
+                &Default::default(),
+            )
+            .map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
+            report(&found.calibration, found.problem.points.len());
+            write_channel(&found.calibration, id, resolution, out)?;
+        }
         return Ok(());
     }
-    let choice = match a.model.as_deref().unwrap_or("auto") {
-        "auto" => ModelChoice::Auto,
-        m => ModelChoice::Fixed(
-            m.parse()
-                .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", e.reason()))?,
-        ),
-    };
-    omniwarp::limits::at_most("--points", a.points, omniwarp::limits::CALIBRATION_POINTS)
-        .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     let found = calibrate_captures(
         resolution,
         &frames,

@@ -139,6 +139,17 @@ pub fn write_cube<T: Pixel>(
     write_output(out, wrap(layout.join(cube)), &[])
 }
 
+/// `value` as pretty JSON at `path`, atomically.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+    let json = serde_json::to_string_pretty(value)?;
+    image_io::atomic_write(path, |f| {
+        use std::io::Write;
+        f.write_all(json.as_bytes())
+            .map_err(|e| omniwarp::Error::file(path, e))
+    })?;
+    Ok(())
+}
+
 pub fn read_rig(path: &Path) -> Result<Rig> {
     Rig::read(path).with_context(|| "--rig".to_string())
 }

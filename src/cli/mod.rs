@@ -21,6 +21,7 @@ mod cubemap;
 mod export;
 mod io;
 mod lens;
+mod measure;
 mod normal_map;
 mod pattern;
 mod projections;
@@ -84,6 +85,9 @@ enum Command {
     /// structured-light sequence (blur, gamma, ambient, vignetting, inter-reflection, noise),
     /// written as a capture folder for `calibrate --captures`, with the truth.
     Simulate(simulate::SimulateArgs),
+    /// The wall's shape from two cameras' captures of one projector: triangulated wall points
+    /// and the rig's kind of surface fitted to them (dome, cylinder or plane).
+    Measure(measure::MeasureArgs),
     /// Write the procedural city as glTF (.gltf + .bin, or .glb).
     Scene(scene::SceneExportArgs),
     /// Benchmarks: time one part of omniwarp and print the figures (run on demand, not in CI).
@@ -118,6 +122,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Export(a) => export::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Simulate(a) => simulate::run(a),
+        Command::Measure(a) => measure::run(a),
         Command::Scene(a) => scene::export(a),
         Command::Bench(c) => bench::run(c),
         Command::WarpBench { rig } => bench::rig::run(&rig),

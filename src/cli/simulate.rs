@@ -7,6 +7,7 @@ use clap::Args;
 use omniwarp::image_io::{Precision, atomic_write, create_dir_durably, write_exr_rgba};
 use omniwarp::raster::Raster;
 use omniwarp::structured::bench::Bench;
+use omniwarp::structured::read_images;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -19,6 +20,11 @@ pub struct SimulateArgs {
     /// pixel's centre sees, A = 1 where the projector lights it).
     #[arg(long)]
     out: PathBuf,
+    /// Film these projector images instead of the sequence (every PNG or JPEG of the folder in
+    /// name order, each of the projector's size): another structured-light code through the
+    /// same bench, as `calibration/peers/opencv_graycode.py` does with OpenCV's.
+    #[arg(long, value_name = "DIR")]
+    patterns: Option<PathBuf>,
 }
 
 pub fn run(a: SimulateArgs) -> Result<()> {
@@ -34,10 +40,33 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         })?;
         Ok(())
     };
-    let frames = bench.patterns().len();
-    for n in 0..frames {
-        write(format!("{n:03}.png"), &bench.capture(n)?.png()?)?;
-    }
+    let frames = match &a.patterns {
+        None => {
+            for n in 0..bench.patterns().len() {
+                write(format!("{n:03}.png"), &bench.capture(n)?.png()?)?;
+            }
+            bench.patterns().len()
+        }
+        Some(dir) => {
+            let images =
+                read_images(dir, "patterns").map_err(|e| anyhow::anyhow!("{}", named(e)))?;
+            for (n, image) in images.iter().enumerate() {
+                if [image.width, image.height] != [projector.width, projector.height] {
+                    anyhow::bail!(
+                        "--patterns: image {n} in name order is {}×{}, `{}` shows {}×{}",
+                        image.width,
+                        image.height,
+                        projector.id,
+                        projector.width,
+                        projector.height
+                    );
+                }
+                let capture = bench.capture_image(image, n as u64)?;
+                write(format!("{n:03}.png"), &capture.png()?)?;
+            }
+            images.len()
+        }
+    };
     write(
         "camera.json".into(),
         serde_json::to_string_pretty(&camera.doc())?.as_bytes(),

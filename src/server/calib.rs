@@ -48,6 +48,22 @@ pub async fn offer(
     resolution: [u32; 2],
     cal: &crate::calibration::Calibration,
 ) -> Result<Response, ApiError> {
+    let proposal = keep_offer(s, id, rig_revision, resolution, cal).await?;
+    Ok((
+        StatusCode::CREATED,
+        axum::Json(serde_json::to_value(&proposal).expect("proposals serialise")),
+    )
+        .into_response())
+}
+
+/// Stores `cal` as a proposal for channel `id` and announces it.
+pub async fn keep_offer(
+    s: &Arc<AppState>,
+    id: &str,
+    rig_revision: u64,
+    resolution: [u32; 2],
+    cal: &crate::calibration::Calibration,
+) -> Result<Proposal, ApiError> {
     let pid = s
         .store
         .next_proposal
@@ -79,11 +95,7 @@ pub async fn offer(
         s.announce(serde_json::json!({"kind": "proposal_dropped", "id": old}));
     }
     s.announce(serde_json::json!({"kind": "proposal", "channel": id, "id": pid}));
-    Ok((
-        StatusCode::CREATED,
-        axum::Json(serde_json::to_value(&proposal).expect("proposals serialise")),
-    )
-        .into_response())
+    Ok(proposal)
 }
 
 fn find(s: &AppState, pid: u64) -> Result<Arc<Proposal>, ApiError> {

@@ -5,13 +5,13 @@
 //! checks the channel's current one and says whether the projector moved.
 
 use super::ApiError;
-use super::calib::offer;
+use super::calib::{keep_offer, offer};
 use super::jobs::run_job;
 use super::state::{AppState, parse_body};
 use crate::calibration::ModelChoice;
 use crate::rig::{Channel, ChannelDoc};
 use crate::structured::decode::{DecodeOptions, decode};
-use crate::structured::{Grey, PatternSet, calibrate_captures, check};
+use crate::structured::{Grey, PatternSet, calibrate_captures, calibrate_decoded, check};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
@@ -87,6 +87,10 @@ struct DecodeBody {
     /// Compare with the channel's current calibration instead of proposing one.
     #[serde(default)]
     check: bool,
+    /// With `check`: when the projector moved, also propose a calibration fitted to the same
+    /// captures.
+    #[serde(default)]
+    refit: bool,
 }
 
 fn default_points() -> usize {
@@ -99,7 +103,13 @@ pub async fn post_captures(
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let b: DecodeBody = parse_body(&body)?;
-    let set = sequence(&s, &id)?;
+    // One snapshot: the sequence decoded and the channel checked or fitted are the same rig's.
+    let (rig, rig_revision) = s.store.snapshot();
+    let projector = rig
+        .channel(&id)
+        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
+        .clone();
+    let set = PatternSet::new(projector.width, projector.height)?;
     let mut camera = Channel::from_doc(&b.camera, "/camera")?;
     if let Some(markers) = &b.markers {
         crate::limits::at_most("/markers", markers.len(), crate::limits::CALIBRATION_POINTS)?;
@@ -147,44 +157,68 @@ pub async fn post_captures(
             ),
         });
     }
-    let (rig, rig_revision) = s.store.snapshot();
-    let projector = rig
-        .channel(&id)
-        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
-        .clone();
     let opts = DecodeOptions::default();
+    let resolution = [projector.width, projector.height];
+    if b.refit && !b.check {
+        return Err(ApiError::Invalid {
+            field: "/refit".into(),
+            reason: "applies to a check; without `check` the captures are fitted anyway".into(),
+        });
+    }
     if b.check {
         let screen = rig.doc.screen.clone();
-        let report = run_job(&s, move |_| {
+        let refit = b.refit;
+        let (mut report, refitted) = run_job(&s, move |cancel| {
             let decoded = decode(&set, &frames, &opts)?;
             let c = check(&decoded, &camera, &screen, &projector);
-            Ok(serde_json::json!({
+            let report = serde_json::json!({
                 "count": c.count,
                 "p50": finite(c.p50), "p95": finite(c.p95), "max": finite(c.max),
                 "threshold": c.threshold,
                 "moved": c.moved,
                 "rejected": rejected(&decoded.rejected),
-            }))
+            });
+            if !(refit && c.moved) {
+                return Ok((report, None));
+            }
+            let found = calibrate_decoded(
+                decoded, resolution, &camera, &screen, choice, b.points, cancel,
+            )
+            .map_err(invalid_as_field)?;
+            Ok((report, Some(found.calibration)))
         })
         .await?;
+        if refit {
+            report["proposal"] = match refitted {
+                Some(cal) => {
+                    let p = keep_offer(&s, &id, rig_revision, resolution, &cal).await?;
+                    serde_json::to_value(&p).expect("proposals serialise")
+                }
+                None => serde_json::Value::Null,
+            };
+        }
         return Ok(Json(report).into_response());
     }
-    let resolution = [projector.width, projector.height];
     let screen = rig.doc.screen.clone();
     let found = run_job(&s, move |cancel| {
         calibrate_captures(
             resolution, &frames, &camera, &screen, choice, b.points, &opts, cancel,
         )
-        .map_err(|e| match e {
-            crate::Error::Invalid { name, reason } => ApiError::Invalid {
-                field: name,
-                reason,
-            },
-            other => other.into(),
-        })
+        .map_err(invalid_as_field)
     })
     .await?;
     offer(&s, &id, rig_revision, resolution, &found.calibration).await
+}
+
+/// A library error naming its field, as the API names it.
+fn invalid_as_field(e: crate::Error) -> ApiError {
+    match e {
+        crate::Error::Invalid { name, reason } => ApiError::Invalid {
+            field: name,
+            reason,
+        },
+        other => other.into(),
+    }
 }
 
 /// JSON has no NaN: a figure over no pixels is null.

@@ -28,7 +28,7 @@
 //! The truth of each camera pixel is the projector coordinate of the wall point its centre
 //! sees, from the exact models.
 
-use super::{Axis, Frame, Grey, PatternSet};
+use super::{Axis, Grey, PatternSet};
 use crate::error::{Error, Result};
 use crate::rig::{Channel, Rig};
 use crate::surface::{Hit, Screen};
@@ -339,20 +339,43 @@ impl Bench {
     /// What the camera captures while the projector shows frame `n` of its sequence.
     pub fn capture(&self, n: usize) -> Result<Grey> {
         let frame = self.set.frame(n, "frame")?;
+        let linear = |v: &u8| self.linear(*v);
+        let light = match frame.axis() {
+            None => Light::Uniform(self.linear(self.set.value(frame, 0))),
+            Some(axis) => Light::Stripes {
+                rows: axis == Axis::Y,
+                values: self.set.profile(frame).iter().map(linear).collect(),
+            },
+        };
+        Ok(self.film(&light, n as u64))
+    }
+
+    /// What the camera captures while the projector shows `image`, any picture of the
+    /// projector's size (another structured-light code, say); `n` seeds the sensor noise as a
+    /// frame number does.
+    pub fn capture_image(&self, image: &Grey, n: u64) -> Result<Grey> {
+        if [image.width, image.height] != [self.set.width, self.set.height] {
+            return Err(Error::invalid(
+                "image",
+                format!(
+                    "is {}×{}, the projector shows {}×{}",
+                    image.width, image.height, self.set.width, self.set.height
+                ),
+            ));
+        }
+        let values = image.data.iter().map(|v| self.linear(*v)).collect();
+        let width = image.width as usize;
+        Ok(self.film(&Light::Image { width, values }, n))
+    }
+
+    fn linear(&self, v: u8) -> f32 {
+        (f64::from(v) / 255.0).powf(self.opts.projector_gamma) as f32
+    }
+
+    /// Steps 3–7 of the module's list for the projector's light, noise seeded by `n`.
+    fn film(&self, light: &Light, n: u64) -> Grey {
         let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         let s2 = (self.opts.supersample * self.opts.supersample) as usize;
-        let gamma = self.opts.projector_gamma;
-        let light: Vec<f32> = self
-            .set
-            .profile(frame)
-            .iter()
-            .map(|&v| (f64::from(v) / 255.0).powf(gamma) as f32)
-            .collect();
-        let along = usize::from(matches!(
-            frame,
-            Frame::Gray { axis: Axis::Y, .. } | Frame::Phase { axis: Axis::Y, .. }
-        ));
-        let constant = matches!(frame, Frame::White | Frame::Black).then(|| light[0]);
         let mut radiance: Vec<f32> = self
             .samples
             .par_chunks_exact(s2)
@@ -361,13 +384,13 @@ impl Bench {
                 let sum: f32 = px
                     .iter()
                     .filter(|q| q[0] != OFF)
-                    .map(|q| constant.unwrap_or_else(|| light[usize::from(q[along])]))
+                    .map(|&q| light.at(q))
                     .sum();
                 sum / s2 as f32
             })
             .collect();
         if let Some(b) = &self.bounce {
-            self.add_bounce(b, frame, &light, &mut radiance);
+            self.add_bounce(b, light, &mut radiance);
         }
         let radiance = blur(&radiance, w, h, self.opts.blur);
         let o = &self.opts;
@@ -379,7 +402,7 @@ impl Bench {
                 let mut rng = Pcg64::seed_from_u64(
                     o.seed
                         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                        .wrapping_add(((n as u64) << 32) | y as u64),
+                        .wrapping_add((n << 32) | y as u64),
                 );
                 for (x, out) in row.iter_mut().enumerate() {
                     let i = y * w + x;
@@ -393,30 +416,19 @@ impl Bench {
                     *out = v.round().clamp(0.0, 255.0) as u8;
                 }
             });
-        Ok(Grey {
+        Grey {
             width: self.camera.width,
             height: self.camera.height,
             data,
-        })
+        }
     }
 
-    /// Adds the one-bounce light of `frame` (its projector profile already linear in `light`).
-    fn add_bounce(&self, b: &Bounce, frame: Frame, light: &[f32], radiance: &mut [f32]) {
-        let by_rows = matches!(
-            frame,
-            Frame::Gray { axis: Axis::Y, .. } | Frame::Phase { axis: Axis::Y, .. }
-        );
-        let constant = matches!(frame, Frame::White | Frame::Black).then(|| light[0]);
+    /// Adds the one-bounce light of the projector's `light`.
+    fn add_bounce(&self, b: &Bounce, light: &Light, radiance: &mut [f32]) {
         let emit: Vec<f32> = b
             .patches
             .iter()
-            .map(|(cols, rows)| {
-                constant.unwrap_or_else(|| {
-                    let r = if by_rows { rows } else { cols };
-                    let span = &light[r[0] as usize..r[1] as usize];
-                    span.iter().sum::<f32>() / span.len() as f32
-                })
-            })
+            .map(|&(cols, rows)| light.mean(cols, rows))
             .collect();
         let k = emit.len();
         let lattice: Vec<f32> = b
@@ -443,6 +455,44 @@ impl Bench {
                         + fy * ((1.0 - fx) * at(0, 1) + fx * at(1, 1));
                 }
             });
+    }
+}
+
+/// What the projector shows, in linear light. The sequence's own frames vary along one axis,
+/// so they are kept as one value per column or row; any other picture is kept whole.
+enum Light {
+    Uniform(f32),
+    Stripes { rows: bool, values: Vec<f32> },
+    Image { width: usize, values: Vec<f32> },
+}
+
+impl Light {
+    fn at(&self, q: [u16; 2]) -> f32 {
+        match self {
+            Light::Uniform(v) => *v,
+            Light::Stripes { rows, values } => values[usize::from(q[usize::from(*rows)])],
+            Light::Image { width, values } => values[usize::from(q[1]) * width + usize::from(q[0])],
+        }
+    }
+
+    /// The mean over projector columns `cols` and rows `rows` (half-open, not empty).
+    fn mean(&self, cols: [u32; 2], rows: [u32; 2]) -> f32 {
+        let span = |r: [u32; 2]| r[0] as usize..r[1] as usize;
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        match self {
+            Light::Uniform(v) => *v,
+            Light::Stripes {
+                rows: false,
+                values,
+            } => mean(&values[span(cols)]),
+            Light::Stripes { rows: true, values } => mean(&values[span(rows)]),
+            Light::Image { width, values } => {
+                let sums: Vec<f32> = span(rows)
+                    .map(|y| mean(&values[y * width..(y + 1) * width][span(cols)]))
+                    .collect();
+                mean(&sums)
+            }
+        }
     }
 }
 

@@ -115,6 +115,16 @@ pub enum Frame {
     },
 }
 
+impl Frame {
+    /// The axis the frame varies along; white and black vary along none.
+    pub fn axis(self) -> Option<Axis> {
+        match self {
+            Frame::White | Frame::Black => None,
+            Frame::Gray { axis, .. } | Frame::Phase { axis, .. } => Some(axis),
+        }
+    }
+}
+
 /// The pattern sequence for one projector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PatternSet {
@@ -208,10 +218,7 @@ impl PatternSet {
 
     /// One row (x frames) or column (y frames, and white and black) of the frame's values.
     pub fn profile(&self, frame: Frame) -> Vec<u8> {
-        let axis = match frame {
-            Frame::Gray { axis, .. } | Frame::Phase { axis, .. } => axis,
-            _ => Axis::X,
-        };
+        let axis = frame.axis().unwrap_or(Axis::X);
         (0..self.side(axis)).map(|i| self.value(frame, i)).collect()
     }
 
@@ -220,10 +227,7 @@ impl PatternSet {
         let profile = self.profile(frame);
         let (w, h) = (self.width as usize, self.height as usize);
         let mut data = vec![0u8; w * h];
-        let by_column = !matches!(
-            frame,
-            Frame::Gray { axis: Axis::Y, .. } | Frame::Phase { axis: Axis::Y, .. }
-        );
+        let by_column = frame.axis() != Some(Axis::Y);
         for (y, row) in data.chunks_exact_mut(w).enumerate() {
             if by_column {
                 row.copy_from_slice(&profile);
@@ -363,6 +367,19 @@ pub fn calibrate_captures<F: std::borrow::Borrow<Grey> + Sync>(
         ));
     }
     let decoded = decode::decode(&set, frames, opts)?;
+    calibrate_decoded(decoded, resolution, camera, screen, choice, points, cancel)
+}
+
+/// [`calibrate_captures`] from captures already decoded.
+pub fn calibrate_decoded(
+    decoded: decode::Decoded,
+    resolution: [u32; 2],
+    camera: &crate::rig::Channel,
+    screen: &crate::surface::Screen,
+    choice: crate::calibration::ModelChoice,
+    points: usize,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<FromCaptures> {
     let found = correspondences(&decoded, camera, screen, points);
     if found.len() < 50 {
         return Err(Error::invalid(
@@ -392,6 +409,12 @@ pub fn calibrate_captures<F: std::borrow::Borrow<Grey> + Sync>(
 /// The capture files of a folder in name order: every `.png`, `.jpg` and `.jpeg` (other files,
 /// such as the camera's JSON, are left alone).
 pub fn read_captures(dir: &std::path::Path) -> Result<Vec<Grey>> {
+    read_images(dir, "captures")
+}
+
+/// The images of a folder in name order, as [`read_captures`] reads them; `field` names the
+/// folder in an error.
+pub fn read_images(dir: &std::path::Path, field: &str) -> Result<Vec<Grey>> {
     let mut names: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| Error::file(dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -402,7 +425,7 @@ pub fn read_captures(dir: &std::path::Path) -> Result<Vec<Grey>> {
         })
         .collect();
     names.sort();
-    crate::limits::at_most("captures", names.len(), MAX_FRAMES)?;
+    crate::limits::at_most(field, names.len(), MAX_FRAMES)?;
     names
         .iter()
         .map(|p| {

@@ -1,10 +1,15 @@
 //! The wall measured, not assumed: two cameras of known pose film the same projector, the
 //! projector pixel both decode ties a pixel of one camera to a pixel of the other, and the two
-//! rays meet on the wall. A surface fitted to those points gives its parameters (a dome's
-//! centre and radius here).
+//! rays meet on the wall. The rig's own kind of surface fitted to those points gives its
+//! parameters: a dome's centre and radius, a cylinder's axis and radius, a plane's normal and
+//! offset. What the points cannot tell is kept from the rig: a sphere has no orientation (the
+//! dome's tilt and rim stay), points on a cylinder do not say where along its axis its centre is
+//! (the rig's centre is moved onto the fitted axis), and the extents of each shape stay.
 
 use super::decode::Decoded;
+use crate::error::{Error, Result};
 use crate::rig::Channel;
+use crate::surface::{Cylinder, Dome, Plane, Screen};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -155,4 +160,314 @@ pub fn fit_sphere(points: &[DVec3]) -> Option<(DVec3, f64)> {
         }
     }
     Some((c, r))
+}
+
+/// The axis and radius of the cylinder nearest `points`, by Gauss–Newton on the points'
+/// distances to the surface from `start` (the rig's cylinder: the fit needs to begin near the
+/// answer, which a rig document is). Returns a point on the axis, the unit axis (on the side of
+/// `start`'s) and the radius; `None` when the points do not determine them (fewer than 5, or
+/// all on one line along the axis).
+pub fn fit_cylinder(points: &[DVec3], start: &Cylinder) -> Option<(DVec3, DVec3, f64)> {
+    if points.len() < 5 {
+        return None;
+    }
+    let mut a = DVec3::from_array(start.axis).normalize();
+    let mut c = DVec3::from_array(start.centre);
+    let mut r = start.radius;
+    for _ in 0..30 {
+        // Moves: the axis tilted by α, β along u, v; its point moved by γ, δ along u, v; r.
+        let u = a.any_orthonormal_vector();
+        let v = a.cross(u);
+        let mut jtj = nalgebra::Matrix5::<f64>::zeros();
+        let mut jtr = nalgebra::Vector5::<f64>::zeros();
+        for p in points {
+            let d = *p - c;
+            let along = d.dot(a);
+            let perp = d - a * along;
+            let rho = perp.length();
+            if rho < 1e-12 {
+                continue;
+            }
+            let (pu, pv) = (perp.dot(u) / rho, perp.dot(v) / rho);
+            let row = nalgebra::Vector5::new(-pu * along, -pv * along, -pu, -pv, -1.0);
+            jtj += row * row.transpose();
+            jtr += row * (rho - r);
+        }
+        let step = jtj.try_inverse()? * -jtr;
+        if !step.iter().all(|s| s.is_finite()) {
+            return None;
+        }
+        a = (a + u * step[0] + v * step[1]).normalize();
+        c += u * step[2] + v * step[3];
+        r += step[4];
+        if step.norm() < 1e-12 {
+            break;
+        }
+    }
+    (r > 0.0 && r.is_finite()).then_some((c, a, r))
+}
+
+/// The plane nearest `points`: its centroid and unit normal (the eigenvector of their scatter
+/// with the smallest eigenvalue). `None` for fewer than 3 points or points on a line.
+pub fn fit_plane(points: &[DVec3]) -> Option<(DVec3, DVec3)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let mean = points.iter().copied().sum::<DVec3>() / points.len() as f64;
+    let mut scatter = nalgebra::Matrix3::<f64>::zeros();
+    for p in points {
+        let d = nalgebra::Vector3::new(p.x - mean.x, p.y - mean.y, p.z - mean.z);
+        scatter += d * d.transpose();
+    }
+    let eig = nalgebra::SymmetricEigen::new(scatter);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    if eig.eigenvalues[order[1]] <= 1e-12 * eig.eigenvalues[order[2]].max(1e-300) {
+        return None;
+    }
+    let n = eig.eigenvectors.column(order[0]);
+    Some((mean, DVec3::new(n[0], n[1], n[2]).normalize()))
+}
+
+/// What measuring the wall found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WallFit {
+    /// The rig's screen with the fitted parameters.
+    pub screen: Screen,
+    /// Points fitted, and points left out as outliers (more than 5 robust deviations off).
+    pub count: usize,
+    pub outliers: usize,
+    /// RMS and largest distance of the fitted points to the fitted surface, metres.
+    pub rms: f64,
+    pub max: f64,
+}
+
+/// Fits `screen`'s own kind of surface to `points` (see the module's notes for what is kept),
+/// once on all points and again without those more than 5 robust deviations off the first
+/// fit. Mesh screens are refused: their shape is the file's.
+pub fn fit_screen(screen: &Screen, points: &[DVec3]) -> Result<WallFit> {
+    let too_few = || {
+        Error::invalid(
+            "points",
+            format!(
+                "{} triangulated wall points do not determine the surface; do both cameras \
+                 see the projector's light, from positions far enough apart?",
+                points.len()
+            ),
+        )
+    };
+    let once = |points: &[DVec3]| -> Result<Screen> {
+        Ok(match screen {
+            Screen::Dome(d) => {
+                let (centre, radius) = fit_sphere(points).ok_or_else(too_few)?;
+                Screen::Dome(Dome {
+                    radius,
+                    centre: centre.to_array(),
+                    ..d.clone()
+                })
+            }
+            Screen::Cylinder(cyl) => {
+                let (on_axis, axis, radius) = fit_cylinder(points, cyl).ok_or_else(too_few)?;
+                let axis = if axis.dot(DVec3::from_array(cyl.axis)) < 0.0 {
+                    -axis
+                } else {
+                    axis
+                };
+                let old = DVec3::from_array(cyl.centre);
+                let centre = on_axis + axis * (old - on_axis).dot(axis);
+                Screen::Cylinder(Cylinder {
+                    radius,
+                    centre: centre.to_array(),
+                    axis: axis.to_array(),
+                    ..cyl.clone()
+                })
+            }
+            Screen::Plane(pl) => {
+                let (mean, normal) = fit_plane(points).ok_or_else(too_few)?;
+                let normal = if normal.dot(DVec3::from_array(pl.normal)) < 0.0 {
+                    -normal
+                } else {
+                    normal
+                };
+                let old = DVec3::from_array(pl.centre);
+                Screen::Plane(Plane {
+                    centre: (old - normal * (old - mean).dot(normal)).to_array(),
+                    normal: normal.to_array(),
+                    ..pl.clone()
+                })
+            }
+            Screen::Mesh { .. } => {
+                return Err(Error::invalid(
+                    "screen",
+                    "a mesh wall's shape is its file's; measure a dome, cylinder or plane",
+                ));
+            }
+        })
+    };
+    let first = once(points)?;
+    let off: Vec<f64> = points.iter().map(|p| distance(&first, *p)).collect();
+    let mut sorted: Vec<f64> = off.iter().map(|d| d.abs()).collect();
+    sorted.sort_by(f64::total_cmp);
+    // 1.4826 × the median absolute deviation estimates σ; the floor keeps exact points.
+    let bound = (5.0 * 1.4826 * sorted[sorted.len() / 2]).max(1e-9);
+    let kept: Vec<DVec3> = points
+        .iter()
+        .zip(&off)
+        .filter(|(_, d)| d.abs() <= bound)
+        .map(|(p, _)| *p)
+        .collect();
+    let screen = once(&kept)?;
+    let off: Vec<f64> = kept.iter().map(|p| distance(&screen, *p).abs()).collect();
+    let rms = (off.iter().map(|d| d * d).sum::<f64>() / off.len() as f64).sqrt();
+    screen.validate("screen")?;
+    Ok(WallFit {
+        screen,
+        count: kept.len(),
+        outliers: points.len() - kept.len(),
+        rms,
+        max: off.iter().copied().fold(0.0, f64::max),
+    })
+}
+
+/// The signed distance from `p` to the full surface (sphere, infinite cylinder or plane).
+fn distance(screen: &Screen, p: DVec3) -> f64 {
+    match screen {
+        Screen::Dome(d) => (p - DVec3::from_array(d.centre)).length() - d.radius,
+        Screen::Cylinder(c) => {
+            let a = DVec3::from_array(c.axis).normalize();
+            let d = p - DVec3::from_array(c.centre);
+            (d - a * d.dot(a)).length() - c.radius
+        }
+        Screen::Plane(pl) => (p - DVec3::from_array(pl.centre)).dot(DVec3::from_array(pl.normal)),
+        Screen::Mesh { .. } => 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points on a cylinder of radius 2.5 whose axis leans 4° and passes 10 cm off the origin,
+    /// over a 100° arc and 1.5 m of height, with `bad` of them thrown 0.2 m off.
+    fn leaning_cylinder(bad: usize) -> (Vec<DVec3>, DVec3, DVec3) {
+        let axis = DVec3::new(4f64.to_radians().sin(), 4f64.to_radians().cos(), 0.0);
+        let on_axis = DVec3::new(0.1, 0.0, 0.0);
+        let u = axis.any_orthonormal_vector();
+        let v = axis.cross(u);
+        let mut points = Vec::new();
+        for i in 0..40 {
+            for j in 0..30 {
+                let a = (-50.0 + 100.0 * f64::from(i) / 39.0).to_radians();
+                let h = -0.5 + 1.5 * f64::from(j) / 29.0;
+                points.push(on_axis + axis * h + (u * a.cos() + v * a.sin()) * 2.5);
+            }
+        }
+        let every = points.len() / bad.max(1);
+        for p in points.iter_mut().step_by(every).take(bad) {
+            *p *= 1.08;
+        }
+        (points, on_axis, axis)
+    }
+
+    fn rig_cylinder() -> Cylinder {
+        Cylinder {
+            radius: 2.0,
+            centre: [0.0, 0.3, 0.0],
+            axis: [0.0, 1.0, 0.0],
+            height: [-1.0, 1.0],
+            arc: [-180.0, 180.0],
+        }
+    }
+
+    #[test]
+    fn a_cylinder_is_fitted_from_a_wrong_start_and_its_centre_kept_on_the_axis() {
+        let (points, on_axis, axis) = leaning_cylinder(0);
+        let (c, a, r) = fit_cylinder(&points, &rig_cylinder()).unwrap();
+        assert!((r - 2.5).abs() < 1e-9, "{r}");
+        assert!(a.angle_between(axis) < 1e-9, "{a}");
+        let off = (c - on_axis) - axis * (c - on_axis).dot(axis);
+        assert!(off.length() < 1e-9, "{c}");
+        let fit = fit_screen(&Screen::Cylinder(rig_cylinder()), &points).unwrap();
+        let Screen::Cylinder(fitted) = &fit.screen else {
+            panic!()
+        };
+        // The rig's centre moved onto the axis along the shortest way: heights keep meaning.
+        let centre = DVec3::from_array(fitted.centre);
+        let along = (DVec3::new(0.0, 0.3, 0.0) - on_axis).dot(axis);
+        assert!(
+            (centre - (on_axis + axis * along)).length() < 1e-9,
+            "{centre}"
+        );
+        assert!(fit.rms < 1e-9 && fit.outliers == 0, "{fit:?}");
+    }
+
+    #[test]
+    fn outliers_are_left_out_of_the_second_fit() {
+        let (points, _, _) = leaning_cylinder(60);
+        let fit = fit_screen(&Screen::Cylinder(rig_cylinder()), &points).unwrap();
+        let Screen::Cylinder(fitted) = &fit.screen else {
+            panic!()
+        };
+        assert_eq!(fit.outliers, 60);
+        assert!((fitted.radius - 2.5).abs() < 1e-9, "{}", fitted.radius);
+    }
+
+    #[test]
+    fn a_plane_keeps_its_side_and_a_sphere_its_tilt() {
+        let normal = DVec3::new(0.1, 0.0, 1.0).normalize();
+        let points: Vec<DVec3> = (0..100)
+            .map(|i| {
+                let (x, y) = (f64::from(i % 10) * 0.3, f64::from(i / 10) * 0.2);
+                let p = DVec3::new(x, y, 0.0);
+                p - normal * (p.dot(normal) + 2.0)
+            })
+            .collect();
+        let plane = Plane {
+            centre: [0.0, 0.0, -1.5],
+            normal: [0.0, 0.0, 1.0],
+            up: [0.0, 1.0, 0.0],
+            width: 4.0,
+            height: 2.0,
+        };
+        let fit = fit_screen(&Screen::Plane(plane), &points).unwrap();
+        let Screen::Plane(p) = &fit.screen else {
+            panic!()
+        };
+        assert!(DVec3::from_array(p.normal).angle_between(normal) < 1e-9);
+        assert!((DVec3::from_array(p.centre).dot(normal) + 2.0).abs() < 1e-9);
+        let dome = Dome {
+            radius: 2.0,
+            centre: [0.0; 3],
+            tilt: 15.0,
+            min_elevation: 0.0,
+        };
+        let sphere: Vec<DVec3> = (0..200)
+            .map(|i| {
+                let (a, e) = (f64::from(i % 20) * 0.3, f64::from(i / 20) * 0.15);
+                DVec3::new(a.cos() * e.cos(), e.sin(), a.sin() * e.cos()) * 3.0
+                    + DVec3::new(0.0, 0.1, 0.0)
+            })
+            .collect();
+        let fit = fit_screen(&Screen::Dome(dome), &sphere).unwrap();
+        let Screen::Dome(d) = &fit.screen else {
+            panic!()
+        };
+        assert!((d.radius - 3.0).abs() < 1e-9 && (d.centre[1] - 0.1).abs() < 1e-9);
+        assert_eq!(d.tilt, 15.0);
+        let mesh = Screen::Mesh {
+            obj: "wall.obj".into(),
+            loaded: None,
+        };
+        assert!(fit_screen(&mesh, &sphere).is_err());
+        assert!(
+            fit_screen(
+                &Screen::Dome(Dome {
+                    radius: 1.0,
+                    ..d.clone()
+                }),
+                &sphere[..3]
+            )
+            .is_err()
+        );
+    }
 }
