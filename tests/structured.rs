@@ -734,68 +734,22 @@ fn a_camera_pose_from_eight_markers_calibrates_the_projector_as_well() {
     assert!(with_markers < 0.005, "{with_markers}");
 }
 
-#[test]
-fn two_cameras_measure_the_cylinder_from_the_command_line() {
-    // The cylinder example's centre projector filmed by two 1280×720 pinholes 1 m apart; the
-    // wall is then measured starting from a rig that has it wrong (radius 2.15 m instead of 2,
-    // axis leaning 3°, centre 9 cm off).
-    let dir = tempfile::tempdir().unwrap();
-    let rig = "calibration/rigs/cylinder-270-3proj.json";
-    let run = |args: &[&str]| {
-        let (ok, out, err) = run(args);
-        assert!(ok, "{err}");
-        out
-    };
-    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    for (name, x) in [("a", -0.5), ("b", 0.5)] {
-        let position = glam::DVec3::new(x, 0.0, 0.3);
-        let target = glam::DVec3::new(0.0, 0.1, -2.0);
-        let mut camera =
-            pinhole(1280, 720, 700.0, (target - position).normalize().to_array()).doc();
-        camera.pose.position = position.to_array();
-        let json = path(&format!("{name}.json"));
-        std::fs::write(&json, serde_json::to_string(&camera).unwrap()).unwrap();
-        let seed = if name == "a" { "1" } else { "2" };
-        run(&[
-            "simulate",
-            "--rig",
-            rig,
-            "--channel",
-            "centre",
-            "--camera",
-            &json,
-            "--seed",
-            seed,
-            "--out",
-            &path(name),
-        ]);
-    }
-    let mut doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(rig).unwrap()).unwrap();
+/// The cylinder example with its wall wrong: radius 2.15 m instead of 2, axis leaning 3°,
+/// centre 9 cm off.
+fn wrong_cylinder() -> serde_json::Value {
+    let rig = std::fs::read_to_string("calibration/rigs/cylinder-270-3proj.json").unwrap();
+    let mut doc: serde_json::Value = serde_json::from_str(&rig).unwrap();
     let lean = 3f64.to_radians();
     doc["screen"]["radius"] = serde_json::json!(2.15);
     doc["screen"]["axis"] = serde_json::json!([lean.sin(), lean.cos(), 0.0]);
     doc["screen"]["centre"] = serde_json::json!([0.05, 0.0, -0.08]);
-    std::fs::write(path("wrong.json"), doc.to_string()).unwrap();
-    let out = run(&[
-        "measure",
-        "--rig",
-        &path("wrong.json"),
-        "--channel",
-        "centre",
-        "--captures",
-        &path("a"),
-        &path("b"),
-        "--camera",
-        &path("a.json"),
-        &path("b.json"),
-        "--out",
-        &path("measured.json"),
-    ]);
-    eprintln!("{out}");
-    let measured = Rig::read(Path::new(&path("measured.json"))).unwrap();
-    let omniwarp::surface::Screen::Cylinder(c) = &measured.doc.screen else {
-        panic!("{:?}", measured.doc.screen)
+    doc
+}
+
+/// The measured cylinder is the true one: radius 2 m, axis vertical through the origin.
+fn assert_true_cylinder(screen: &omniwarp::surface::Screen) {
+    let omniwarp::surface::Screen::Cylinder(c) = screen else {
+        panic!("{screen:?}")
     };
     let axis = glam::DVec3::from_array(c.axis);
     let centre = glam::DVec3::from_array(c.centre);
@@ -808,7 +762,137 @@ fn two_cameras_measure_the_cylinder_from_the_command_line() {
         (centre - axis * centre.dot(axis)).length() < 0.005,
         "centre {centre}"
     );
-    // The rest of the rig is the rig's.
-    assert_eq!(measured.doc.channels.len(), 3);
+    // The rest of the screen is the rig's.
     assert_eq!(c.height, [-1.0, 1.2]);
+}
+
+/// The two 1280×720 pinholes 1 m apart of the README's walkthrough (`camera-a.json`, `-b`).
+const CAMERAS: [&str; 2] = [
+    "calibration/examples/camera-a.json",
+    "calibration/examples/camera-b.json",
+];
+
+#[test]
+fn two_cameras_measure_the_cylinder_from_the_command_line() {
+    // The cylinder example's centre projector filmed by both cameras; the wall is then
+    // measured starting from a rig that has it wrong.
+    let dir = tempfile::tempdir().unwrap();
+    let rig = "calibration/rigs/cylinder-270-3proj.json";
+    let run = |args: &[&str]| {
+        let (ok, out, err) = run(args);
+        assert!(ok, "{err}");
+        out
+    };
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    for (name, camera, seed) in [("a", CAMERAS[0], "1"), ("b", CAMERAS[1], "2")] {
+        run(&[
+            "simulate",
+            "--rig",
+            rig,
+            "--channel",
+            "centre",
+            "--camera",
+            camera,
+            "--seed",
+            seed,
+            "--out",
+            &path(name),
+        ]);
+    }
+    std::fs::write(path("wrong.json"), wrong_cylinder().to_string()).unwrap();
+    let out = run(&[
+        "measure",
+        "--rig",
+        &path("wrong.json"),
+        "--channel",
+        "centre",
+        "--captures",
+        &path("a"),
+        &path("b"),
+        "--camera",
+        CAMERAS[0],
+        CAMERAS[1],
+        "--out",
+        &path("measured.json"),
+    ]);
+    eprintln!("{out}");
+    let measured = Rig::read(Path::new(&path("measured.json"))).unwrap();
+    assert_true_cylinder(&measured.doc.screen);
+    assert_eq!(measured.doc.channels.len(), 3);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_daemon_measures_the_wall_from_two_views() {
+    use axum::body::Body;
+    use axum::http::{Request, StatusCode, header};
+    use common::server::{call, get, json, state_with, write};
+    let wrong = serde_json::from_value(wrong_cylinder()).unwrap();
+    let s = state_with(None, None, wrong);
+    let rig = Rig::read(Path::new("calibration/rigs/cylinder-270-3proj.json")).unwrap();
+    let projector = rig.channel("centre").unwrap().clone();
+    let cameras = CAMERAS.map(|p| {
+        let doc: ChannelDoc = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        Channel::from_doc(&doc, "").unwrap()
+    });
+    for (camera, view) in cameras.iter().zip(["a", "b"]) {
+        let bench = Bench::new(&rig, &projector, camera, BenchOptions::default()).unwrap();
+        for n in 0..bench.patterns().len() {
+            let png = bench.capture(n).unwrap().png().unwrap();
+            let req = Request::put(format!("/v1/channels/centre/captures/{n}?view={view}"))
+                .header(header::CONTENT_TYPE, "image/png")
+                .body(Body::from(png))
+                .unwrap();
+            assert_eq!(call(&s, req).await.0, StatusCode::OK);
+        }
+    }
+    let (_, _, body) = call(&s, get("/v1/channels/centre/captures?view=b")).await;
+    assert_eq!(json(&body)["missing"], serde_json::json!([]));
+    let (_, _, body) = call(&s, get("/v1/channels/centre/captures")).await;
+    assert_eq!(json(&body)["received"], serde_json::json!([]));
+    let wall = |views: serde_json::Value| {
+        write(
+            "POST",
+            "/v1/channels/centre/wall",
+            None,
+            serde_json::json!({ "views": views }).to_string(),
+        )
+    };
+    let view = |i: usize, name: Option<&str>| serde_json::json!({"camera": cameras[i].doc(), "view": name});
+    let (st, _, body) = call(
+        &s,
+        wall(serde_json::json!([view(0, Some("a")), view(1, Some("b"))])),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let answer = json(&body);
+    assert_true_cylinder(&serde_json::from_value(answer["screen"].clone()).unwrap());
+    assert_eq!(answer["rig_screen"]["radius"], 2.15);
+    assert!(answer["count"].as_u64().unwrap() > 20_000, "{answer}");
+
+    // Refused, each by name: one view, a view name that is not one, a view with nothing
+    // uploaded, and a view name in the query.
+    for (views, field) in [
+        (serde_json::json!([view(0, Some("a"))]), "/views"),
+        (
+            serde_json::json!([view(0, Some("a")), view(1, Some("b c"))]),
+            "/views/1/view",
+        ),
+        (
+            serde_json::json!([view(0, Some("a")), view(1, None)]),
+            "/views/1/view",
+        ),
+    ] {
+        let (st, _, body) = call(&s, wall(views)).await;
+        assert_eq!(
+            (st, json(&body)["field"].as_str()),
+            (StatusCode::BAD_REQUEST, Some(field)),
+            "{}",
+            String::from_utf8_lossy(&body)
+        );
+    }
+    let (st, _, body) = call(&s, get("/v1/channels/centre/captures?view=%2E%2E")).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("view"))
+    );
 }

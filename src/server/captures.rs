@@ -7,10 +7,11 @@
 use super::ApiError;
 use super::calib::{keep_offer, offer};
 use super::jobs::run_job;
-use super::state::{AppState, parse_body};
+use super::state::{AppState, Query, parse_body};
 use crate::calibration::ModelChoice;
 use crate::rig::{Channel, ChannelDoc};
 use crate::structured::decode::{DecodeOptions, decode};
+use crate::structured::triangulate::{fit_screen, triangulate};
 use crate::structured::{Grey, PatternSet, calibrate_captures, calibrate_decoded, check};
 use axum::Json;
 use axum::body::Bytes;
@@ -30,6 +31,36 @@ pub(super) fn sequence(s: &AppState, id: &str) -> Result<PatternSet, ApiError> {
     Ok(PatternSet::new(ch.width, ch.height)?)
 }
 
+/// Which camera's captures a request means: several cameras can film the same channel (to
+/// measure the wall from two of them), each under a view name; without one, the channel's
+/// default view.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewQuery {
+    #[serde(default)]
+    view: Option<String>,
+}
+
+/// The capture store's key for channel `id`'s captures of `view`; `field` names the view in
+/// an error.
+fn slot(id: &str, view: Option<&str>, field: &str) -> Result<String, ApiError> {
+    match view {
+        None => Ok(id.to_string()),
+        Some(v)
+            if (1..=32).contains(&v.len())
+                && v.bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_') =>
+        {
+            // The unit separator cannot appear in a view name, so keys never collide.
+            Ok(format!("{id}\u{1f}{v}"))
+        }
+        Some(v) => Err(ApiError::Invalid {
+            field: field.into(),
+            reason: format!("must be 1–32 letters, digits, `-` or `_`, got `{v}`"),
+        }),
+    }
+}
+
 fn status(s: &AppState, id: &str, set: &PatternSet) -> serde_json::Value {
     let (got, size) = s.captures.status(id, set.len());
     let missing: Vec<usize> = (0..set.len()).filter(|n| !got.contains(n)).collect();
@@ -39,34 +70,39 @@ fn status(s: &AppState, id: &str, set: &PatternSet) -> serde_json::Value {
 pub async fn get_captures(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
+    Query(q): Query<ViewQuery>,
 ) -> Result<Response, ApiError> {
     let set = sequence(&s, &id)?;
-    Ok(Json(status(&s, &id, &set)).into_response())
+    let key = slot(&id, q.view.as_deref(), "view")?;
+    Ok(Json(status(&s, &key, &set)).into_response())
 }
 
 pub async fn delete_captures(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
+    Query(q): Query<ViewQuery>,
 ) -> Result<Response, ApiError> {
     sequence(&s, &id)?;
-    let dropped = s.captures.clear(&id);
+    let dropped = s.captures.clear(&slot(&id, q.view.as_deref(), "view")?);
     Ok(Json(serde_json::json!({"dropped": dropped})).into_response())
 }
 
 pub async fn put_capture(
     State(s): State<Arc<AppState>>,
     Path((id, n)): Path<(String, String)>,
+    Query(q): Query<ViewQuery>,
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let set = sequence(&s, &id)?;
+    let key = slot(&id, q.view.as_deref(), "view")?;
     let n: usize = n.parse().map_err(|_| ApiError::Invalid {
         field: "n".into(),
         reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
     })?;
     set.frame(n, "n")?;
     let grey = run_job(&s, move |_| Ok(Grey::decode(&body, "body")?)).await?;
-    s.captures.put(&id, n, set.len(), grey)?;
-    Ok(Json(status(&s, &id, &set)).into_response())
+    s.captures.put(&key, n, set.len(), grey)?;
+    Ok(Json(status(&s, &key, &set)).into_response())
 }
 
 #[derive(Deserialize)]
@@ -100,9 +136,11 @@ fn default_points() -> usize {
 pub async fn post_captures(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
+    Query(q): Query<ViewQuery>,
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let b: DecodeBody = parse_body(&body)?;
+    let key = slot(&id, q.view.as_deref(), "view")?;
     // One snapshot: the sequence decoded and the channel checked or fitted are the same rig's.
     let (rig, rig_revision) = s.store.snapshot();
     let projector = rig
@@ -135,17 +173,7 @@ pub async fn post_captures(
             reason: e.reason(),
         })?),
     };
-    let frames = s
-        .captures
-        .all(&id, set.len())
-        .map_err(|missing| ApiError::Invalid {
-            field: "captures".into(),
-            reason: format!(
-                "{} of the {} frames are missing: {missing:?} (PUT …/captures/{{n}})",
-                missing.len(),
-                set.len()
-            ),
-        })?;
+    let frames = complete(&s, &key, &set, "captures")?;
     if let Some(f) = frames.first()
         && (f.width, f.height) != (camera.width, camera.height)
     {
@@ -208,6 +236,136 @@ pub async fn post_captures(
     })
     .await?;
     offer(&s, &id, rig_revision, resolution, &found.calibration).await
+}
+
+/// Every frame of the captures under `key`, or an error naming `field` with those missing.
+fn complete(
+    s: &AppState,
+    key: &str,
+    set: &PatternSet,
+    field: &str,
+) -> Result<Vec<Arc<Grey>>, ApiError> {
+    s.captures
+        .all(key, set.len())
+        .map_err(|missing| ApiError::Invalid {
+            field: field.into(),
+            reason: format!(
+                "{} of the {} frames are missing: {missing:?} (PUT …/captures/{{n}})",
+                missing.len(),
+                set.len()
+            ),
+        })
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WallBody {
+    /// The two cameras' captures of the channel: each camera, its pose known, and the view its
+    /// captures were uploaded under (none: the default view).
+    views: Vec<WallView>,
+    /// Every n-th decoded pixel of the first view, each way.
+    #[serde(default = "default_step")]
+    step: u32,
+    /// Pixel pairs whose rays pass further apart are left out, metres.
+    #[serde(default = "default_gap")]
+    gap: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WallView {
+    camera: ChannelDoc,
+    #[serde(default)]
+    view: Option<String>,
+}
+
+fn default_step() -> u32 {
+    2
+}
+
+fn default_gap() -> f64 {
+    0.01
+}
+
+/// The wall measured from two views' captures of the channel: the points triangulated and the
+/// rig's kind of wall fitted to them. The answer holds the fitted screen beside the rig's;
+/// applying it is an ordinary rig edit (PUT /v1/rig), the client's decision.
+pub async fn post_wall(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let b: WallBody = parse_body(&body)?;
+    if b.views.len() != 2 {
+        return Err(ApiError::Invalid {
+            field: "/views".into(),
+            reason: format!("must hold two views, got {}", b.views.len()),
+        });
+    }
+    if !(1..=64).contains(&b.step) {
+        return Err(ApiError::Invalid {
+            field: "/step".into(),
+            reason: format!("must lie within 1–64, got {}", b.step),
+        });
+    }
+    if !(b.gap.is_finite() && b.gap > 0.0 && b.gap <= 1.0) {
+        return Err(ApiError::Invalid {
+            field: "/gap".into(),
+            reason: format!("must lie within 0–1 m, got {}", b.gap),
+        });
+    }
+    let (rig, rig_revision) = s.store.snapshot();
+    let projector = rig
+        .channel(&id)
+        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
+        .clone();
+    let set = PatternSet::new(projector.width, projector.height)?;
+    let mut views = Vec::new();
+    for (i, v) in b.views.iter().enumerate() {
+        let camera = Channel::from_doc(&v.camera, &format!("/views/{i}/camera"))?;
+        let key = slot(&id, v.view.as_deref(), &format!("/views/{i}/view"))?;
+        let frames = complete(&s, &key, &set, &format!("/views/{i}/view"))?;
+        if let Some(f) = frames.first()
+            && (f.width, f.height) != (camera.width, camera.height)
+        {
+            return Err(ApiError::Invalid {
+                field: format!("/views/{i}/camera/resolution"),
+                reason: format!(
+                    "is {}×{}, the captures {}×{}",
+                    camera.width, camera.height, f.width, f.height
+                ),
+            });
+        }
+        views.push((camera, frames));
+    }
+    let screen = rig.doc.screen.clone();
+    let (step, gap) = (b.step, b.gap);
+    let fit = run_job(&s, move |_| {
+        let opts = DecodeOptions::default();
+        let decoded = views
+            .iter()
+            .map(|(_, frames)| decode(&set, frames, &opts))
+            .collect::<crate::Result<Vec<_>>>()?;
+        let points = triangulate(
+            (&decoded[0], &views[0].0),
+            (&decoded[1], &views[1].0),
+            [set.width, set.height],
+            step,
+            gap,
+        );
+        fit_screen(&screen, &points).map_err(invalid_as_field)
+    })
+    .await?;
+    Ok(Json(serde_json::json!({
+        "count": fit.count,
+        "outliers": fit.outliers,
+        "rms": fit.rms,
+        "max": fit.max,
+        "screen": fit.screen,
+        "rig_screen": rig.doc.screen,
+        "rig_revision": rig_revision,
+    }))
+    .into_response())
 }
 
 /// A library error naming its field, as the API names it.

@@ -99,6 +99,7 @@ routes! {
         .post(captures::post_captures)
         .delete(captures::delete_captures);
     "/v1/channels/{id}/captures/{n}" => put(captures::put_capture);
+    "/v1/channels/{id}/wall" => post(captures::post_wall);
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
     "/v1/meshes" => get(meshes::list);
