@@ -273,6 +273,47 @@ fn inter_reflection_on_the_dome_leaves_one_percent_gross_errors_at_most() {
 }
 
 #[test]
+fn a_defocused_camera_decodes_with_a_longer_period() {
+    // A blur of σ = 4 camera pixels (about 10 of the projector's) flattens the 16 px sinusoid
+    // to nothing; a 64 px period keeps most of it. (The 16 px case is shown at half the size,
+    // where the blur is twice as wide in projector pixels, to save time.)
+    let rig = dome();
+    let projector = rig.channel("front").unwrap().clone();
+    let fisheye = |w, h| omniwarp::structured::bench::fisheye_at_eye(&rig, &projector, w, h);
+    let decoded = |period: u32, camera: Channel| {
+        let opts = BenchOptions {
+            blur: 4.0,
+            period,
+            ..Default::default()
+        };
+        let bench = Bench::new(&rig, &projector, &camera, opts).unwrap();
+        assert_eq!(bench.patterns().period, period);
+        let decoded = decode(
+            bench.patterns(),
+            &capture_all(&bench),
+            &DecodeOptions::default(),
+        )
+        .unwrap();
+        let (errors, lit) = decode_errors(&bench, &decoded);
+        (bench.patterns().len(), errors, lit)
+    };
+    let (frames, errors, _) = decoded(16, fisheye(960, 540).unwrap());
+    assert_eq!(frames, 58);
+    assert!(errors.is_empty(), "{} decoded at 16 px", errors.len());
+    let (frames, mut errors, lit) = decoded(64, fisheye(1920, 1080).unwrap());
+    assert_eq!(frames, 50);
+    let gross = errors.iter().filter(|&&e| e > 1.0).count();
+    let median = percentile(&mut errors, 0.5);
+    eprintln!(
+        "σ = 4 px blur, 64 px period: {} of {lit} lit pixels decoded, median {median:.4} px, {gross} gross",
+        errors.len()
+    );
+    assert!(errors.len() * 10 > lit * 8, "{} of {lit}", errors.len());
+    assert!(median < 0.25, "median {median}");
+    assert!(gross * 100 < errors.len() * 2, "{gross} gross");
+}
+
+#[test]
 fn a_yaw_of_five_hundredths_of_a_degree_is_detected_and_noise_is_not() {
     let rig = dome();
     let projector = rig.channel("front").unwrap().clone();
@@ -455,6 +496,11 @@ fn simulated_captures_calibrate_and_check_from_the_command_line() {
     );
 
     // Conditions no camera has are refused by name.
+    let (ok, _, err) = run(&["simulate", "--period", "7", "--out", caps_s]);
+    assert!(
+        !ok && err.contains("--period: must be an even number of projector pixels, 8–256, got 7"),
+        "{err}"
+    );
     let (ok, _, err) = run(&["simulate", "--rig", rig, "--noise=-1", "--out", caps_s]);
     assert!(
         !ok && err.contains("--noise: must lie within 0–64, got -1"),
@@ -511,6 +557,31 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
     for n in 0..57 {
         let (st, _, body) = call(&s, put(n.to_string(), "image/png", png(n))).await;
         assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    }
+    let (_, _, body) = call(&s, get("/v1/channels/front/captures?period=64")).await;
+    assert_eq!(
+        (
+            json(&body)["frames"].as_u64(),
+            json(&body)["received"].as_array().map(Vec::len)
+        ),
+        (Some(50), Some(0))
+    );
+    for (uri, status) in [
+        ("/v1/channels/front/pattern/49?period=64", StatusCode::OK),
+        (
+            "/v1/channels/front/pattern/50?period=64",
+            StatusCode::BAD_REQUEST,
+        ),
+        (
+            "/v1/channels/front/pattern/0?period=7",
+            StatusCode::BAD_REQUEST,
+        ),
+        (
+            "/v1/channels/front/captures?period=300",
+            StatusCode::BAD_REQUEST,
+        ),
+    ] {
+        assert_eq!(call(&s, get(uri)).await.0, status, "{uri}");
     }
     let (_, _, body) = call(&s, get("/v1/channels/front/captures")).await;
     let status = json(&body);

@@ -301,6 +301,10 @@ pub struct BenchConditions {
     pub interreflection: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The sequence's phase period, projector pixels (even, 8–256): longer for a camera too
+    /// defocused to see 16 px stripes. Give calibrate and measure the same.
+    #[arg(long, default_value_t = 16)]
+    pub period: u32,
 }
 
 impl BenchConditions {
@@ -341,6 +345,7 @@ impl BenchConditions {
             vignetting: self.vignetting,
             interreflection: self.interreflection,
             seed: self.seed,
+            period: self.period,
             ..Default::default()
         };
         opts.validate().map_err(|e| match e {

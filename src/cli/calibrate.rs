@@ -46,6 +46,10 @@ pub struct CalibrateArgs {
     /// pixels, B its length, A = 1 where decoded) and say whether the projector moved.
     #[arg(long, requires = "captures")]
     check: Option<PathBuf>,
+    /// The phase period the captures' patterns were shown with, projector pixels (with
+    /// --captures; `simulate --period`).
+    #[arg(long, default_value_t = 16)]
+    period: u32,
     /// Decoded camera pixels used as correspondences, at most (with --captures).
     #[arg(long, default_value_t = 5000)]
     points: usize,
@@ -185,9 +189,11 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     let frames = read_captures(dir).map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
     let resolution = [projector.width, projector.height];
+    let set = PatternSet::new(resolution[0], resolution[1])?
+        .with_period(a.period)
+        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?;
     let opts = DecodeOptions::default();
     if let Some(out) = &a.check {
-        let set = PatternSet::new(resolution[0], resolution[1])?;
         let decoded = decode(&set, &frames, &opts)
             .map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
         let c = check(&decoded, &camera, &rig.doc.screen, projector);
@@ -238,7 +244,7 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         return Ok(());
     }
     let found = calibrate_captures(
-        resolution,
+        &set,
         &frames,
         &camera,
         &rig.doc.screen,

@@ -33,6 +33,9 @@ pub struct MeasureArgs {
     /// Leave out pixel pairs whose rays pass further apart than this, metres.
     #[arg(long, default_value_t = 0.01)]
     gap: f64,
+    /// The phase period the patterns were shown with, projector pixels.
+    #[arg(long, default_value_t = 16)]
+    period: u32,
     /// Write the rig with the fitted wall here (JSON).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -44,7 +47,9 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     }
     let rig = read_rig(&a.rig)?;
     let projector = channel(&rig, &a.channel)?;
-    let set = PatternSet::new(projector.width, projector.height)?;
+    let set = PatternSet::new(projector.width, projector.height)?
+        .with_period(a.period)
+        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?;
     let mut views = Vec::new();
     for (dir, camera) in a.captures.iter().zip(&a.camera) {
         let camera = read_camera(camera)?;

@@ -20,15 +20,33 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use std::sync::Arc;
 
-/// The channel's pattern sequence; 404 for an id the rig does not have.
-pub(super) fn sequence(s: &AppState, id: &str) -> Result<PatternSet, ApiError> {
+/// The channel's pattern sequence with phase period `period` (default 16); 404 for an id the
+/// rig does not have.
+pub(super) fn sequence(
+    s: &AppState,
+    id: &str,
+    period: Option<u32>,
+    field: &str,
+) -> Result<PatternSet, ApiError> {
     let (rig, _) = s.store.snapshot();
     let ch = rig
         .channels
         .iter()
         .find(|c| c.id == id)
         .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
-    Ok(PatternSet::new(ch.width, ch.height)?)
+    with_period(PatternSet::new(ch.width, ch.height)?, period, field)
+}
+
+/// `set` with phase period `period` where one is given, an error naming `field` if it is not
+/// one.
+fn with_period(set: PatternSet, period: Option<u32>, field: &str) -> Result<PatternSet, ApiError> {
+    match period {
+        None => Ok(set),
+        Some(p) => set.with_period(p).map_err(|e| ApiError::Invalid {
+            field: field.into(),
+            reason: e.reason(),
+        }),
+    }
 }
 
 /// Which camera's captures a request means: several cameras can film the same channel (to
@@ -39,13 +57,22 @@ pub(super) fn sequence(s: &AppState, id: &str) -> Result<PatternSet, ApiError> {
 pub struct ViewQuery {
     #[serde(default)]
     view: Option<String>,
+    /// The sequence's phase period, as the patterns were shown with it.
+    #[serde(default)]
+    period: Option<u32>,
 }
 
-/// The capture store's key for channel `id`'s captures of `view`; `field` names the view in
-/// an error.
-fn slot(id: &str, view: Option<&str>, field: &str) -> Result<String, ApiError> {
+/// The capture store's key for channel `id`'s captures of `view` in sequence `set`; `field`
+/// names the view in an error. Sequences of other periods have other frames, so each is kept
+/// apart.
+fn slot(id: &str, view: Option<&str>, set: &PatternSet, field: &str) -> Result<String, ApiError> {
+    let id = if set.period == crate::structured::PERIOD {
+        id.to_string()
+    } else {
+        format!("{id}\u{1f}{}", set.period)
+    };
     match view {
-        None => Ok(id.to_string()),
+        None => Ok(id),
         Some(v)
             if (1..=32).contains(&v.len())
                 && v.bytes()
@@ -72,8 +99,8 @@ pub async fn get_captures(
     Path(id): Path<String>,
     Query(q): Query<ViewQuery>,
 ) -> Result<Response, ApiError> {
-    let set = sequence(&s, &id)?;
-    let key = slot(&id, q.view.as_deref(), "view")?;
+    let set = sequence(&s, &id, q.period, "period")?;
+    let key = slot(&id, q.view.as_deref(), &set, "view")?;
     Ok(Json(status(&s, &key, &set)).into_response())
 }
 
@@ -82,8 +109,10 @@ pub async fn delete_captures(
     Path(id): Path<String>,
     Query(q): Query<ViewQuery>,
 ) -> Result<Response, ApiError> {
-    sequence(&s, &id)?;
-    let dropped = s.captures.clear(&slot(&id, q.view.as_deref(), "view")?);
+    let set = sequence(&s, &id, q.period, "period")?;
+    let dropped = s
+        .captures
+        .clear(&slot(&id, q.view.as_deref(), &set, "view")?);
     Ok(Json(serde_json::json!({"dropped": dropped})).into_response())
 }
 
@@ -93,8 +122,8 @@ pub async fn put_capture(
     Query(q): Query<ViewQuery>,
     body: Bytes,
 ) -> Result<Response, ApiError> {
-    let set = sequence(&s, &id)?;
-    let key = slot(&id, q.view.as_deref(), "view")?;
+    let set = sequence(&s, &id, q.period, "period")?;
+    let key = slot(&id, q.view.as_deref(), &set, "view")?;
     let n: usize = n.parse().map_err(|_| ApiError::Invalid {
         field: "n".into(),
         reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
@@ -140,14 +169,18 @@ pub async fn post_captures(
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let b: DecodeBody = parse_body(&body)?;
-    let key = slot(&id, q.view.as_deref(), "view")?;
     // One snapshot: the sequence decoded and the channel checked or fitted are the same rig's.
     let (rig, rig_revision) = s.store.snapshot();
     let projector = rig
         .channel(&id)
         .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
         .clone();
-    let set = PatternSet::new(projector.width, projector.height)?;
+    let set = with_period(
+        PatternSet::new(projector.width, projector.height)?,
+        q.period,
+        "period",
+    )?;
+    let key = slot(&id, q.view.as_deref(), &set, "view")?;
     let mut camera = Channel::from_doc(&b.camera, "/camera")?;
     if let Some(markers) = &b.markers {
         crate::limits::at_most("/markers", markers.len(), crate::limits::CALIBRATION_POINTS)?;
@@ -230,7 +263,7 @@ pub async fn post_captures(
     let screen = rig.doc.screen.clone();
     let found = run_job(&s, move |cancel| {
         calibrate_captures(
-            resolution, &frames, &camera, &screen, choice, b.points, &opts, cancel,
+            &set, &frames, &camera, &screen, choice, b.points, &opts, cancel,
         )
         .map_err(invalid_as_field)
     })
@@ -269,6 +302,9 @@ struct WallBody {
     /// Pixel pairs whose rays pass further apart are left out, metres.
     #[serde(default = "default_gap")]
     gap: f64,
+    /// The phase period the patterns were shown with.
+    #[serde(default)]
+    period: Option<u32>,
 }
 
 #[derive(Deserialize)]
@@ -319,11 +355,15 @@ pub async fn post_wall(
         .channel(&id)
         .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
         .clone();
-    let set = PatternSet::new(projector.width, projector.height)?;
+    let set = with_period(
+        PatternSet::new(projector.width, projector.height)?,
+        b.period,
+        "/period",
+    )?;
     let mut views = Vec::new();
     for (i, v) in b.views.iter().enumerate() {
         let camera = Channel::from_doc(&v.camera, &format!("/views/{i}/camera"))?;
-        let key = slot(&id, v.view.as_deref(), &format!("/views/{i}/view"))?;
+        let key = slot(&id, v.view.as_deref(), &set, &format!("/views/{i}/view"))?;
         let frames = complete(&s, &key, &set, &format!("/views/{i}/view"))?;
         if let Some(f) = frames.first()
             && (f.width, f.height) != (camera.width, camera.height)

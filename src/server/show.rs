@@ -112,17 +112,29 @@ pub async fn output(
 /// Frame `n` of the channel's structured-light sequence (`src/structured/mod.rs`), an 8-bit
 /// grey PNG at the channel's resolution: what a media server or the console puts on the
 /// projector while a camera captures it for `omniwarp calibrate --captures`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PatternQuery {
+    /// The sequence's phase period, projector pixels (default 16).
+    #[serde(default)]
+    period: Option<u32>,
+}
+
 pub async fn pattern(
     State(s): State<Arc<AppState>>,
     Path((id, n)): Path<(String, String)>,
+    Query(q): Query<PatternQuery>,
 ) -> Result<Response, ApiError> {
-    let set = super::captures::sequence(&s, &id)?;
+    let set = super::captures::sequence(&s, &id, q.period, "period")?;
     let n: usize = n.parse().map_err(|_| ApiError::Invalid {
         field: "n".into(),
         reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
     })?;
     let frame = set.frame(n, "n")?;
-    let etag = format!("\"pattern-{}x{}-{n}\"", set.width, set.height);
+    let etag = format!(
+        "\"pattern-{}x{}-p{}-{n}\"",
+        set.width, set.height, set.period
+    );
     let png = run_job(&s, move |_| Ok(set.image(frame).png()?)).await?;
     outputs::file(&s, png, "image/png", &etag)
 }

@@ -60,6 +60,8 @@ pub struct BenchOptions {
     /// The fraction of full scale that full white plus ambient reaches at the image centre.
     pub exposure: f64,
     pub seed: u64,
+    /// The sequence's phase period, projector pixels ([`PatternSet::with_period`]).
+    pub period: u32,
 }
 
 impl Default for BenchOptions {
@@ -75,6 +77,7 @@ impl Default for BenchOptions {
             noise: 2.0,
             exposure: 0.8,
             seed: 1,
+            period: super::PERIOD,
         }
     }
 }
@@ -105,7 +108,8 @@ impl BenchOptions {
         check("vignetting", self.vignetting, 0.0, 0.95)?;
         check("interreflection", self.interreflection, 0.0, 1.0)?;
         check("noise", self.noise, 0.0, 64.0)?;
-        check("exposure", self.exposure, 0.01, 4.0)
+        check("exposure", self.exposure, 0.01, 4.0)?;
+        PatternSet::new(1, 1)?.with_period(self.period).map(|_| ())
     }
 }
 
@@ -157,7 +161,7 @@ impl Bench {
             camera.width as usize * camera.height as usize,
             super::CAPTURE_PIXELS,
         )?;
-        let set = PatternSet::new(projector.width, projector.height)?;
+        let set = PatternSet::new(projector.width, projector.height)?.with_period(opts.period)?;
         let screen = &rig.doc.screen;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let s = opts.supersample as usize;

@@ -1,7 +1,7 @@
 //! Decoding captures of the [`PatternSet`] sequence: per camera pixel, the projector pixel
 //! that lights it, to a fraction of a pixel, with a confidence.
 
-use super::{Axis, Grey, PERIOD, PatternSet, STEPS, step_angle};
+use super::{Axis, Grey, PatternSet, STEPS, step_angle};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
 use std::borrow::Borrow;
@@ -15,7 +15,9 @@ pub struct DecodeOptions {
     pub min_contrast: f64,
     /// Least amplitude of the phase sinusoid, grey levels, on both axes.
     pub min_modulation: f64,
-    /// Largest predicted standard deviation of the decoded position, projector pixels.
+    /// Largest predicted standard deviation of the decoded position, projector pixels, for the
+    /// 16 px period; other periods scale it with theirs (it bounds the phase's noise, which
+    /// is the same fraction of any period).
     pub max_sigma: f64,
     /// Pixels dropped next to every undecoded one (see [`erode`]).
     pub erode: u32,
@@ -130,16 +132,16 @@ pub fn decode<F: Borrow<Grey> + Sync>(
             if contrast < opts.min_contrast {
                 return (None, Some(Fail::Dark));
             }
-            let ax = match axis(v, x_at, bx, set.width, opts) {
+            let ax = match axis(v, x_at, bx, set.width, set.period, opts) {
                 Ok(a) => a,
                 Err(f) => return (None, Some(f)),
             };
-            let ay = match axis(v, y_at, by, set.height, opts) {
+            let ay = match axis(v, y_at, by, set.height, set.period, opts) {
                 Ok(a) => a,
                 Err(f) => return (None, Some(f)),
             };
             let sigma = ax.1.max(ay.1);
-            if sigma > opts.max_sigma {
+            if sigma > opts.max_sigma * f64::from(set.period) / f64::from(super::PERIOD) {
                 return (None, Some(Fail::Noisy));
             }
             (
@@ -164,7 +166,12 @@ pub fn decode<F: Borrow<Grey> + Sync>(
             None => {}
         }
     }
-    let edge = erode(&mut samples, w as usize, h as usize, opts.erode);
+    let edge = erode(
+        &mut samples,
+        w as usize,
+        h as usize,
+        opts.erode * set.period / super::PERIOD,
+    );
     rejected.edge = edge;
     Ok(Decoded {
         width: w,
@@ -229,6 +236,7 @@ fn axis(
     at: usize,
     bits: usize,
     side: u32,
+    period: u32,
     opts: &DecodeOptions,
 ) -> std::result::Result<(f64, f64), Fail> {
     let mut gray = 0u32;
@@ -259,7 +267,7 @@ fn axis(
         return Err(Fail::Flat);
     }
     let phi = s.atan2(c);
-    let p = f64::from(PERIOD);
+    let p = f64::from(period);
     let wrapped = phi / TAU * p;
     let centre = (f64::from(half) + 0.5) * p / 2.0;
     let x = wrapped + p * ((centre - wrapped) / p).round();

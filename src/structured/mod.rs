@@ -7,7 +7,8 @@
 //!   read as "brighter than its inverse", which needs no threshold and no knowledge of the
 //!   wall's albedo, the ambient light or either gamma. Neighbouring codes differ in one bit, so
 //!   a pixel on a stripe edge can only be read as one of the two stripes it touches.
-//! * **N-step phase shift** of a sinusoid with period [`PERIOD`] projector pixels, in
+//! * **N-step phase shift** of a sinusoid with a period of [`PERIOD`] projector pixels (or
+//!   another, [`PatternSet::with_period`], for a camera too defocused to see 16 px), in
 //!   [`STEPS`] steps: the phase gives a sub-pixel position within the period. With 12 steps,
 //!   harmonics 2–10 of the sinusoid cancel in the phase, so the projector's and the camera's
 //!   gamma (which bend the sinusoid) do not bias it. Inter-reflection spreads light over
@@ -29,7 +30,7 @@ pub mod triangulate;
 use crate::error::{Error, Result};
 use std::f64::consts::TAU;
 
-/// The phase-shift period in projector pixels.
+/// The phase-shift period in projector pixels, unless a set is given another.
 pub const PERIOD: u32 = 16;
 /// Phase steps per axis.
 pub const STEPS: u32 = 12;
@@ -130,6 +131,8 @@ impl Frame {
 pub struct PatternSet {
     pub width: u32,
     pub height: u32,
+    /// The phase-shift period, projector pixels; the finest Gray stripe is half of it.
+    pub period: u32,
 }
 
 impl PatternSet {
@@ -141,7 +144,26 @@ impl PatternSet {
                 format!("must be between 1 and {side} pixels each way, got {width}×{height}"),
             ));
         }
-        Ok(PatternSet { width, height })
+        Ok(PatternSet {
+            width,
+            height,
+            period: PERIOD,
+        })
+    }
+
+    /// The same sequence with a phase period of `period` projector pixels (even, 8–256). Blur
+    /// of σ (in projector pixels) keeps exp(−2π²σ²/P²) of a period P's amplitude: at σ = 2 a
+    /// 16 px period keeps 74 %, at σ = 8 under 1 %, where a 64 px period keeps 74 % again. A
+    /// longer period costs precision in proportion (the phase's error in pixels grows with
+    /// the period) and saves a Gray bit per doubling.
+    pub fn with_period(self, period: u32) -> Result<PatternSet> {
+        if !(8..=256).contains(&period) || !period.is_multiple_of(2) {
+            return Err(Error::invalid(
+                "period",
+                format!("must be an even number of projector pixels, 8–256, got {period}"),
+            ));
+        }
+        Ok(PatternSet { period, ..self })
     }
 
     fn side(&self, axis: Axis) -> u32 {
@@ -153,7 +175,7 @@ impl PatternSet {
 
     /// Gray bits for an axis: enough to number its half periods.
     pub fn bits(&self, axis: Axis) -> u32 {
-        let halves = self.side(axis).div_ceil(PERIOD / 2);
+        let halves = self.side(axis).div_ceil(self.period / 2);
         (u32::BITS - (halves - 1).leading_zeros()).max(1)
     }
 
@@ -204,13 +226,13 @@ impl PatternSet {
             Frame::White => 255,
             Frame::Black => 0,
             Frame::Gray { axis, bit, inverse } => {
-                let half = i / (PERIOD / 2);
+                let half = i / (self.period / 2);
                 let gray = half ^ (half >> 1);
                 let on = (gray >> (self.bits(axis) - 1 - bit)) & 1 == 1;
                 if on != inverse { 255 } else { 0 }
             }
             Frame::Phase { step, .. } => {
-                let v = 0.5 + 0.5 * phase_cos(f64::from(i), step);
+                let v = 0.5 + 0.5 * phase_cos(f64::from(i), self.period, step);
                 (255.0 * v).round() as u8
             }
         }
@@ -243,10 +265,10 @@ impl PatternSet {
     }
 }
 
-/// The phase pattern's cosine at projector coordinate `x` for step `step`:
+/// The phase pattern's cosine at projector coordinate `x` for step `step` of a `period`:
 /// cos(2π·x/P − 2π·step/N). Pixel centres sit at integer `x`.
-fn phase_cos(x: f64, step: u32) -> f64 {
-    (TAU * x / f64::from(PERIOD) - step_angle(step)).cos()
+fn phase_cos(x: f64, period: u32, step: u32) -> f64 {
+    (TAU * x / f64::from(period) - step_angle(step)).cos()
 }
 
 fn step_angle(step: u32) -> f64 {
@@ -340,12 +362,12 @@ pub struct FromCaptures {
     pub calibration: crate::calibration::Calibration,
 }
 
-/// Decodes `frames` (the sequence of a `resolution` projector, in order), turns at most
+/// Decodes `frames` (the sequence `set`, in order), turns at most
 /// `points` decoded pixels into correspondences through `camera` (pose known) onto `screen`,
 /// and calibrates, until `cancel` is set.
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate_captures<F: std::borrow::Borrow<Grey> + Sync>(
-    resolution: [u32; 2],
+    set: &PatternSet,
     frames: &[F],
     camera: &crate::rig::Channel,
     screen: &crate::surface::Screen,
@@ -354,7 +376,6 @@ pub fn calibrate_captures<F: std::borrow::Borrow<Grey> + Sync>(
     opts: &decode::DecodeOptions,
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<FromCaptures> {
-    let set = PatternSet::new(resolution[0], resolution[1])?;
     if let Some(f) = frames.first().map(std::borrow::Borrow::borrow)
         && (f.width, f.height) != (camera.width, camera.height)
     {
@@ -366,7 +387,8 @@ pub fn calibrate_captures<F: std::borrow::Borrow<Grey> + Sync>(
             ),
         ));
     }
-    let decoded = decode::decode(&set, frames, opts)?;
+    let decoded = decode::decode(set, frames, opts)?;
+    let resolution = [set.width, set.height];
     calibrate_decoded(decoded, resolution, camera, screen, choice, points, cancel)
 }
 
