@@ -20,33 +20,52 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use std::sync::Arc;
 
-/// The channel's pattern sequence with phase period `period` (default 16); 404 for an id the
-/// rig does not have.
+/// One reading of the rig for a capture request, so that the sequence decoded and the channel
+/// checked or fitted are the same rig's.
+struct Reading {
+    rig: Arc<crate::rig::Rig>,
+    revision: u64,
+    channel: Channel,
+    set: PatternSet,
+}
+
+/// Channel `id` (404 if the rig has none) and its sequence with phase period `period`
+/// (default 16), an error naming `field` for a period that is not one.
+fn read_channel(
+    s: &AppState,
+    id: &str,
+    period: Option<u32>,
+    field: &str,
+) -> Result<Reading, ApiError> {
+    let (rig, revision) = s.store.snapshot();
+    let channel = rig
+        .channel(id)
+        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
+        .clone();
+    let set = PatternSet::new(channel.width, channel.height)?;
+    let set = match period {
+        None => set,
+        Some(p) => set.with_period(p).map_err(|e| ApiError::Invalid {
+            field: field.into(),
+            reason: e.reason(),
+        })?,
+    };
+    Ok(Reading {
+        rig,
+        revision,
+        channel,
+        set,
+    })
+}
+
+/// The channel's pattern sequence, as [`read_channel`] reads it.
 pub(super) fn sequence(
     s: &AppState,
     id: &str,
     period: Option<u32>,
     field: &str,
 ) -> Result<PatternSet, ApiError> {
-    let (rig, _) = s.store.snapshot();
-    let ch = rig
-        .channels
-        .iter()
-        .find(|c| c.id == id)
-        .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
-    with_period(PatternSet::new(ch.width, ch.height)?, period, field)
-}
-
-/// `set` with phase period `period` where one is given, an error naming `field` if it is not
-/// one.
-fn with_period(set: PatternSet, period: Option<u32>, field: &str) -> Result<PatternSet, ApiError> {
-    match period {
-        None => Ok(set),
-        Some(p) => set.with_period(p).map_err(|e| ApiError::Invalid {
-            field: field.into(),
-            reason: e.reason(),
-        }),
-    }
+    Ok(read_channel(s, id, period, field)?.set)
 }
 
 /// Which camera's captures a request means: several cameras can film the same channel (to
@@ -169,17 +188,12 @@ pub async fn post_captures(
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let b: DecodeBody = parse_body(&body)?;
-    // One snapshot: the sequence decoded and the channel checked or fitted are the same rig's.
-    let (rig, rig_revision) = s.store.snapshot();
-    let projector = rig
-        .channel(&id)
-        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
-        .clone();
-    let set = with_period(
-        PatternSet::new(projector.width, projector.height)?,
-        q.period,
-        "period",
-    )?;
+    let Reading {
+        rig,
+        revision: rig_revision,
+        channel: projector,
+        set,
+    } = read_channel(&s, &id, q.period, "period")?;
     let key = slot(&id, q.view.as_deref(), &set, "view")?;
     let mut camera = Channel::from_doc(&b.camera, "/camera")?;
     if let Some(markers) = &b.markers {
@@ -350,16 +364,12 @@ pub async fn post_wall(
             reason: format!("must lie within 0–1 m, got {}", b.gap),
         });
     }
-    let (rig, rig_revision) = s.store.snapshot();
-    let projector = rig
-        .channel(&id)
-        .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
-        .clone();
-    let set = with_period(
-        PatternSet::new(projector.width, projector.height)?,
-        b.period,
-        "/period",
-    )?;
+    let Reading {
+        rig,
+        revision: rig_revision,
+        set,
+        ..
+    } = read_channel(&s, &id, b.period, "/period")?;
     let mut views = Vec::new();
     for (i, v) in b.views.iter().enumerate() {
         let camera = Channel::from_doc(&v.camera, &format!("/views/{i}/camera"))?;
