@@ -196,6 +196,57 @@ fn project_of_unproject_is_identity_across_each_image() {
     }
 }
 
+/// A walk along rows (what a rig warp does) gives each pixel the ray `unproject` gives it
+/// alone, restarting after pixels with none; and for the OpenCV models it starts each pixel
+/// on the line through the last two answers, which leaves Newton about one step a pixel (from
+/// the neighbouring answer alone it takes two).
+#[test]
+fn a_walk_along_rows_unprojects_each_pixel_as_alone_in_one_newton_step() {
+    let mut steps = Vec::new();
+    for c in &fixtures().cases {
+        let l = lens(c);
+        let closed_form_newton = matches!(l.model(), LensModel::OpenCv(n) if n <= 12);
+        let (w, h) = (
+            (2.0 * c.intrinsics[2]) as usize,
+            (2.0 * c.intrinsics[3]) as usize,
+        );
+        let (mut worst, mut n, mut walked) = (0.0f64, 0usize, 0u64);
+        for j in (0..h).step_by(h / 10) {
+            let mut walk = l.walk();
+            for i in 0..w {
+                let q = [i as f64, j as f64];
+                match (walk.unproject(q), l.unproject(q)) {
+                    (Ok(a), Ok(b)) => {
+                        worst = worst.max(angle(a, b));
+                        n += 1;
+                    }
+                    (Err(_), Err(_)) => {}
+                    (a, b) => panic!("{}: pixel {q:?}: walked {a:?}, alone {b:?}", c.model),
+                }
+            }
+            walked += walk.steps();
+        }
+        // 1e-10 px apart at most, over focal lengths of hundreds of pixels.
+        assert!(
+            n > 1000 && worst < 1e-11,
+            "{}: {n} pixels, worst {worst} rad",
+            c.model
+        );
+        if closed_form_newton {
+            // 1.0 on most fixtures, 1.54 on the strongest distortion (k1 = −0.25).
+            let per_pixel = walked as f64 / n as f64;
+            assert!(
+                per_pixel < 1.6,
+                "{}: {per_pixel} Newton steps a pixel",
+                c.model
+            );
+            steps.push(per_pixel);
+        }
+    }
+    let mean = steps.iter().sum::<f64>() / steps.len() as f64;
+    assert!(steps.len() == 12 && mean < 1.2, "{steps:?}");
+}
+
 #[test]
 fn closed_form_models_round_trip_and_reach_behind() {
     for (name, behind) in [

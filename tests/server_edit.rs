@@ -165,12 +165,15 @@ async fn tile_screens_follow_the_geometry_until_edited_and_patch_atomically() {
     assert!(tag.ends_with("-1.2\""), "{tag}");
     let err = largest_angle(&exact, &tiled);
     assert!(err < 0.02, "33×19 tiles vs exact geometry: {err}°");
+    // The keeper writes a second after the channel's last change: `warps/` may not exist yet.
     let kept = || -> Vec<String> {
         std::fs::read_dir(dir.path().join("warps"))
-            .unwrap()
-            .map(|e| e.unwrap().file_name().into_string().unwrap())
-            .filter(|n| n.starts_with("left-"))
-            .collect()
+            .map(|d| {
+                d.map(|e| e.unwrap().file_name().into_string().unwrap())
+                    .filter(|n| n.starts_with("left-"))
+                    .collect()
+            })
+            .unwrap_or_default()
     };
     // Kept under the hash in the ETag, and only that one: older warp maps are removed (by the
     // keeper thread, after the answer).
@@ -1641,9 +1644,10 @@ async fn previews_are_kept_and_rebuilt_only_where_an_edit_reaches() {
         let (st, h, png) = call(&s, get(q)).await;
         assert_eq!(st, StatusCode::OK);
         let how = h["x-omniwarp-preview"].to_str().unwrap().to_string();
-        assert!(h["server-timing"].to_str().unwrap().contains("frame;dur="));
+        let timing = h["server-timing"].to_str().unwrap().to_string();
+        assert!(timing.contains("frame;dur="));
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
-        (how, img.into_raw())
+        (how, img.into_raw(), timing)
     };
     let patch = |s: std::sync::Arc<omniwarp::server::AppState>, revision: u64, theta: f64| async move {
         let body = edits(serde_json::json!([
@@ -1657,16 +1661,16 @@ async fn previews_are_kept_and_rebuilt_only_where_an_edit_reaches() {
         assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&reply));
     };
     let s = demo();
-    let (how, first) = preview(s.clone()).await;
+    let (how, first, _) = preview(s.clone()).await;
     assert_eq!(how, "built");
-    let (how, again) = preview(s.clone()).await;
+    let (how, again, _) = preview(s.clone()).await;
     assert_eq!((how.as_str(), again == first), ("kept", true));
 
     // The first edit turns the geometry into a tile screen; the second moves one feature.
     patch(s.clone(), 1, 9.0).await;
     preview(s.clone()).await;
     patch(s.clone(), 2, 8.5).await;
-    let (how, edited) = preview(s.clone()).await;
+    let (how, edited, timing) = preview(s.clone()).await;
     let rows: Vec<usize> = how
         .strip_prefix("rows ")
         .unwrap_or_else(|| panic!("rebuilt, not `{how}`"))
@@ -1676,12 +1680,42 @@ async fn previews_are_kept_and_rebuilt_only_where_an_edit_reaches() {
     // The preview is 540 rows; one feature of a 33 × 19 grid reaches a few tiles' worth.
     assert!(rows[1] - rows[0] < 200, "rebuilt rows {rows:?}");
     assert_ne!(edited, first, "the edit shows");
+    // The warp itself was drawn again only in the rows the edit reached (the Server-Timing
+    // says which; the warp is 1080 rows), and it is the one a cold daemon computes (below).
+    let drawn: Vec<usize> = timing
+        .split("warp;desc=\"rows ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no rows redrawn in `{timing}`"))
+        .split('"')
+        .next()
+        .unwrap()
+        .split('-')
+        .map(|n| n.parse().unwrap())
+        .collect();
+    assert!(drawn[1] - drawn[0] < 300, "warp rows {drawn:?}");
+    let (st, _, warp) = call(&s, get("/v1/channels/centre/warp.exr")).await;
+    assert_eq!(st, StatusCode::OK);
 
     let fresh = demo();
     patch(fresh.clone(), 1, 9.0).await;
     patch(fresh.clone(), 2, 8.5).await;
-    let (how, cold) = preview(fresh.clone()).await;
+    let (how, cold, _) = preview(fresh.clone()).await;
     assert_eq!(how, "built");
+    let (_, _, cold_warp) = call(&fresh, get("/v1/channels/centre/warp.exr")).await;
+    // Compared decoded: the EXR header's attributes come out in no fixed order.
+    let decoded = |bytes: &[u8]| {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("warp.exr");
+        std::fs::write(&path, bytes).unwrap();
+        let map = omniwarp::normalmap::NormalMap::read(&path).unwrap();
+        let mut attributes = map.attributes.clone();
+        attributes.sort();
+        (map.pixels().data.clone(), attributes)
+    };
+    assert!(
+        decoded(&warp) == decoded(&cold_warp),
+        "the warp after the edit is the cold daemon's"
+    );
     let differing = edited
         .chunks_exact(4)
         .zip(cold.chunks_exact(4))

@@ -742,3 +742,58 @@ fn subdivision_coarsening_and_refinement_keep_the_warp() {
         error(&kept)
     );
 }
+
+/// After an edit moving one feature, drawing only the rows `rows_changed` names into the old
+/// map gives, bit for bit, the map of the edited screen drawn whole (what the daemon relies
+/// on to redraw a channel's warp after a tile edit); the fisheye's image circle cuts the rows
+/// as it cuts the whole.
+#[test]
+fn an_edit_redraws_only_the_rows_it_changed() {
+    let (w, h) = (300, 240);
+    let src = source("fisheye", params(None, None, Some(180.0)), w, h);
+    let t = build::from_source(&src, 17, 13).unwrap();
+    let e = t
+        .edit(&Edit::SetFeature {
+            column: 8,
+            row: 6,
+            phi: Some(4.0),
+            theta: Some(-3.0),
+            scale: None,
+            f: Some(0.3),
+        })
+        .unwrap();
+    let rows = t
+        .rows_changed(&e, h)
+        .expect("the same grid, features moved");
+    // One feature reaches the two rows of tiles around it (240 / 12 rows of tiles each).
+    assert!(
+        !rows.is_empty() && rows.len() <= 2 * 20 + 4,
+        "rows {rows:?}"
+    );
+    let (before, after) = (t.feature_map(w, h), e.feature_map(w, h));
+    let (old_map, old_f) = (before.normal_map(), before.f());
+    let (new_map, new_f) = (after.normal_map(), after.f());
+    let (map, f) = e
+        .feature_rows(w, h, rows.clone())
+        .spliced(&old_map, &old_f)
+        .unwrap();
+    assert!(
+        map.pixels().data == new_map.pixels().data,
+        "the spliced map"
+    );
+    assert!(f == new_f, "the spliced f");
+    // And the edit does change those rows: the range is not merely everything.
+    let differs = |j: usize| {
+        old_map.pixels().data[j * w..(j + 1) * w] != new_map.pixels().data[j * w..(j + 1) * w]
+    };
+    assert!(rows.clone().any(differs));
+    assert!((0..h).filter(|j| !rows.contains(j)).all(|j| !differs(j)));
+    // Screens that differ in more than features' values are redrawn whole.
+    let mut other = e.clone();
+    other.interpolation = match e.interpolation {
+        Interpolation::Angles => Interpolation::Vectors,
+        Interpolation::Vectors => Interpolation::Angles,
+    };
+    assert_eq!(t.rows_changed(&other, h), None);
+    assert_eq!(t.rows_changed(&t.clone(), h), Some(0..0));
+}

@@ -56,7 +56,7 @@ pub fn run(a: WarpArgs) -> Result<()> {
     };
     w.map.write(&a.out, precision)?;
     if let Some(path) = &a.wall {
-        image_io::write_exr_rgba(path, &w.wall, &w.map.attributes, precision)?;
+        image_io::write_exr_rgba(path, &w.wall(), &w.map.attributes, precision)?;
     }
     Ok(())
 }

@@ -290,6 +290,16 @@ impl Lens {
         self.unproject_near(q, None)
     }
 
+    /// Unprojects pixels met one after another along a row (or any evenly stepped line),
+    /// each started from the answers before it: see [`Walk`].
+    pub fn walk(&self) -> Walk<'_> {
+        Walk {
+            lens: self,
+            last: [None, None],
+            steps: 0,
+        }
+    }
+
     /// [`Lens::unproject`] started from `guess`, a ray close to the answer (a neighbouring
     /// pixel's): iterative models then converge in a step or two. The answer is the same.
     pub fn unproject_near(
@@ -344,7 +354,7 @@ impl Lens {
                     .map_or([u, v], |g| [g.x / g.z, g.y / g.z]);
                 let core = [i[0], i[1], i[2], i[3]];
                 match opencv::undistort(core, &i[4..], q, start, self.fold) {
-                    Some([x, y]) => DVec3::new(x, y, 1.0).normalize(),
+                    Some(([x, y], _)) => DVec3::new(x, y, 1.0).normalize(),
                     None => solve::unproject(self, q, guess)?,
                 }
             }
@@ -357,6 +367,74 @@ impl Lens {
 
     pub fn unproject_batch(&self, pixels: &[[f64; 2]]) -> Vec<std::result::Result<DVec3, NoImage>> {
         pixels.iter().map(|q| self.unproject(*q)).collect()
+    }
+}
+
+/// A lens unprojecting evenly spaced pixels in order ([`Lens::walk`]). Each pixel's iterative
+/// unprojection starts on the line through the last two answers, on the plane z = 1 where the
+/// OpenCV models solve: the image point moves smoothly from pixel to pixel, so the line lands
+/// within a second-order step of the answer and Newton needs one step where the neighbouring
+/// answer alone needs two. The answers are [`Lens::unproject`]'s (the same root, to its
+/// 1e-10 px). After a pixel with no ray, the next starts afresh.
+pub struct Walk<'a> {
+    lens: &'a Lens,
+    /// The last two answers on the plane z = 1, newest first (`None`: no ray, or one at or
+    /// behind the plane's horizon).
+    last: [Option<[f64; 2]>; 2],
+    /// Newton steps taken on the line so far (the closed form's; see [`Walk::steps`]).
+    steps: u64,
+}
+
+impl Walk<'_> {
+    /// How many Newton steps the pixels started on the line took: about one a pixel where
+    /// the line works (two from the neighbouring answer alone). What the tests hold it to.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The unit ray of pixel `q`, the next along the walk.
+    #[inline]
+    pub fn unproject(&mut self, q: [f64; 2]) -> std::result::Result<DVec3, NoImage> {
+        let lens = self.lens;
+        // The closed-form Newton of the OpenCV models works on the plane itself: its answer
+        // is the next start as it is, with no division on the way.
+        if let (LensModel::OpenCv(n), [Some(a), Some(b)]) = (lens.model, self.last)
+            && n <= 12
+        {
+            let i = &lens.intrinsics;
+            let start = [2.0 * a[0] - b[0], 2.0 * a[1] - b[1]];
+            let core = [i[0], i[1], i[2], i[3]];
+            if let Some(([x, y], steps)) = opencv::undistort(core, &i[4..], q, start, lens.fold) {
+                self.last = [Some([x, y]), Some(a)];
+                self.steps += u64::from(steps);
+                return Ok(DVec3::new(x, y, 1.0).normalize());
+            }
+        }
+        self.afresh(q)
+    }
+
+    /// Every other case: a row's first pixels, a model without a plane to walk on, a pixel
+    /// the closed form gives up on.
+    fn afresh(&mut self, q: [f64; 2]) -> std::result::Result<DVec3, NoImage> {
+        let lens = self.lens;
+        if !matches!(
+            lens.model,
+            LensModel::OpenCv(_) | LensModel::Cahvor | LensModel::SplinedStereographic { .. }
+        ) {
+            // Closed forms: nothing to start from.
+            return lens.unproject(q);
+        }
+        let guess = match self.last {
+            [Some(a), Some(b)] => Some([2.0 * a[0] - b[0], 2.0 * a[1] - b[1]]),
+            [a, _] => a,
+        };
+        let ray = lens.unproject_near(q, guess.map(|[x, y]| DVec3::new(x, y, 1.0)));
+        let plane = match ray {
+            Ok(r) if r.z > 1e-9 => Some([r.x / r.z, r.y / r.z]),
+            _ => None,
+        };
+        self.last = [plane, self.last[0]];
+        ray
     }
 }
 

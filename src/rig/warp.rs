@@ -15,9 +15,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 #[derive(Debug, Clone)]
 pub struct ChannelWarp {
     pub map: NormalMap,
-    /// X, Y, Z of the wall point in metres, A = 1 where the pixel lights the wall.
-    pub wall: Raster<[f32; 4]>,
-    /// The wall points in full precision (`None` off the wall).
+    /// The wall points in full precision, row by row (`None` off the wall); [`Self::wall`]
+    /// makes them a raster.
     pub points: Vec<Option<DVec3>>,
 }
 
@@ -32,15 +31,27 @@ impl Rig {
     }
 
     /// The content sampling vector for wall point `p`.
+    #[inline(always)]
     pub fn sampling_vector(&self, p: DVec3) -> Option<DVec3> {
         self.sampling_vector_from(p, self.eye)
     }
 
     /// The content sampling vector for wall point `p` when the content is a panorama projected
     /// from `centre` (seed 001); at the eye this is [`Rig::sampling_vector`], to the bit.
+    // Always inlined: its answer returned through memory stalls the warp's loop.
+    #[inline(always)]
     pub fn sampling_vector_from(&self, p: DVec3, centre: DVec3) -> Option<DVec3> {
-        let d = (p - centre).try_normalize()?;
-        Some(self.content_vector(d))
+        // V = C·d − O normalised, d = r/|r|, is C·r − |r|·O normalised (C is linear): without
+        // an off-axis offset |r| is not needed, one square root a pixel instead of two.
+        let r = p - centre;
+        if self.offaxis == DVec3::ZERO {
+            return self.content.apply(r).try_normalize();
+        }
+        let len = r.length();
+        if !(len > 0.0 && len.is_finite()) {
+            return None;
+        }
+        (self.content.apply(r) - len * self.offaxis).try_normalize()
     }
 
     /// V = C·d − O, normalised: the content direction of world direction `d`.
@@ -84,11 +95,10 @@ impl Rig {
         };
         let pixels = map_pixels(w, map.height(), cancel, |i, j| {
             let v = map.direction(i, j)?;
-            let d = match points.and_then(|p| p[j * w + i]) {
-                Some(p) => from.of_point(p)?,
-                None => from.direction(self.world_direction(v)),
-            };
-            Some(self.content_vector(d))
+            match points.and_then(|p| p[j * w + i]) {
+                Some(p) => self.sampling_vector_from(p, centre),
+                None => Some(self.content_vector(from.direction(self.world_direction(v)))),
+            }
         })?;
         let mut attributes = map.attributes.clone();
         attributes.push(("omniwarp.project_from".into(), format_point(centre)));
@@ -106,17 +116,12 @@ impl Rig {
         centre: DVec3,
     ) -> crate::Result<NormalMap> {
         crate::raster::check_size(width, height, 1)?;
-        let from = Projective {
-            surface: &self.doc.screen,
-            eye: self.eye,
-            centre,
-        };
         let never = AtomicBool::new(false);
         let pixels = map_pixels(width as usize, height as usize, &never, |i, j| {
             let (s, t) = screen_of_pixel(i as f64 + 0.5, j as f64 + 0.5, width, height);
             let ray = view.direction(s, t).ok()?;
             let p = self.doc.screen.hit(self.eye, ray)?;
-            Some(self.content_vector(from.of_point(p)?))
+            self.sampling_vector_from(p, centre)
         })
         .expect("never cancelled");
         let attributes = vec![
@@ -138,39 +143,31 @@ impl Rig {
     /// client that goes away stops the work within a row's time.
     pub fn warp_unless(&self, ch: &Channel, cancel: &AtomicBool) -> Option<ChannelWarp> {
         let (w, h) = (ch.width as usize, ch.height as usize);
+        let screen = self.doc.screen.prepare();
         // Points are written once, below (filling 32 bytes × 8 million pixels beforehand cost
-        // a tenth of a 4K warp); the two rasters start as zeroed pages.
+        // a tenth of a 4K warp); the map starts as zeroed pages.
         let mut points: Vec<Option<DVec3>> = Vec::with_capacity(w * h);
         let mut map = vec![[0.0f32; 4]; w * h];
-        let mut wall = vec![[0.0f32; 4]; w * h];
-        // One pass per row writes all three outputs; along a row each pixel's ray starts the
-        // next one's iterative unprojection.
+        // One pass per row writes both outputs, walking the lens along it (each pixel's
+        // unprojection starts from the ones before) and the wall prepared once. The f32 wall
+        // raster `--wall` writes is made from the points only when asked for.
         points.spare_capacity_mut()[..w * h]
             .par_chunks_mut(w)
             .zip(map.par_chunks_mut(w))
-            .zip(wall.par_chunks_mut(w))
             .enumerate()
-            .for_each(|(j, ((row, vectors), walls))| {
+            .for_each(|(j, (row, vectors))| {
                 if cancel.load(Ordering::Relaxed) {
                     row.fill(std::mem::MaybeUninit::new(None));
                     return;
                 }
-                let mut guess = None;
-                for (i, ((p, v), o)) in row.iter_mut().zip(vectors).zip(walls).enumerate() {
-                    let ray = ch.lens.unproject_near([i as f64, j as f64], guess).ok();
-                    guess = ray;
-                    let point = ray.and_then(|r| {
-                        self.doc
-                            .screen
-                            .intersect(ch.position, ch.rotation * r)
-                            .point()
-                    });
+                let mut walk = ch.lens.walk();
+                for (i, (p, v)) in row.iter_mut().zip(vectors).enumerate() {
+                    let ray = walk.unproject([i as f64, j as f64]).ok();
+                    let point =
+                        ray.and_then(|r| screen.intersect(ch.position, ch.rotation * r).point());
                     p.write(point);
-                    if let Some(q) = point {
-                        *o = [q.x as f32, q.y as f32, q.z as f32, 1.0];
-                        if let Some(s) = self.sampling_vector(q) {
-                            *v = [s.x as f32, s.y as f32, s.z as f32, 1.0];
-                        }
+                    if let Some(s) = point.and_then(|q| self.sampling_vector(q)) {
+                        *v = [s.x as f32, s.y as f32, s.z as f32, 1.0];
                     }
                 }
             });
@@ -185,20 +182,31 @@ impl Rig {
             height: h,
             data: map,
         };
-        let wall = Raster {
-            width: w,
-            height: h,
-            data: wall,
-        };
         let attributes = vec![
             ("omniwarp.channel".to_string(), ch.id.clone()),
             ("omniwarp.projection".to_string(), "rig".to_string()),
         ];
         Some(ChannelWarp {
             map: NormalMap::from_pixels(map, attributes).expect("unit vectors and 0/1 validity"),
-            wall,
             points,
         })
+    }
+}
+
+impl ChannelWarp {
+    /// X, Y, Z of each pixel's wall point in metres as f32, A = 1 where the pixel lights the
+    /// wall (all 0 elsewhere): the wall raster `omniwarp warp --wall` writes.
+    pub fn wall(&self) -> Raster<[f32; 4]> {
+        let data = self
+            .points
+            .par_iter()
+            .map(|p| p.map_or([0.0; 4], |q| [q.x as f32, q.y as f32, q.z as f32, 1.0]))
+            .collect();
+        Raster {
+            width: self.map.width(),
+            height: self.map.height(),
+            data,
+        }
     }
 }
 

@@ -19,6 +19,13 @@ pub struct Computed {
     pub geometry: Arc<Geometry>,
     pub map: NormalMap,
     pub f: Option<Vec<f32>>,
+    /// The tile screen `map` and `f` were drawn from as they are (none where there is no
+    /// screen, or a panorama centre moved its directions): a later edit of it redraws only
+    /// the rows it changed, into copies of these.
+    pub drawn_from: Option<crate::tiles::TileScreen>,
+    /// The rows of `map` drawn again from the channel's previous warp after a tile edit
+    /// (`None`: drawn whole, or no tile screen).
+    pub redrawn: Option<std::ops::Range<usize>>,
     /// The map as an EXR file, encoded once: what `warp.exr` serves and `keep` writes, so
     /// both are the same bytes and a request after the first needs no worker.
     pub exr: std::sync::OnceLock<Vec<u8>>,

@@ -19,6 +19,8 @@ pub struct Job {
     pub computed: Arc<Computed>,
     /// A hash of everything the computed warp depends on (see [`keys`]).
     pub key: u64,
+    /// How long computing the warp took, where this job computed it (`None`: it was kept).
+    pub computed_in: Option<std::time::Duration>,
 }
 
 impl Job {
@@ -188,22 +190,29 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
         geometry_key,
         key,
     } = inputs;
-    let cached = s
+    // The channel's entry: its warp now, or the one before this change.
+    let kept = s
         .computed
         .lock()
         .expect("cache lock")
-        .get(&(id.to_string(), key))
-        .cloned();
-    if let Some(c) = cached {
-        return Ok(Job {
-            rig,
-            rig_revision,
-            tiles_revision,
-            canvas,
-            computed: c,
-            key,
-        });
-    }
+        .iter()
+        .find(|(k, _)| k.0 == id)
+        .map(|(k, c)| (k.1, c.clone()));
+    let previous = match kept {
+        Some((k, c)) if k == key => {
+            return Ok(Job {
+                rig,
+                rig_revision,
+                tiles_revision,
+                canvas,
+                computed: c,
+                key,
+                computed_in: None,
+            });
+        }
+        kept => kept.map(|(_, c)| c),
+    };
+    let started = std::time::Instant::now();
     let geometry = s
         .warps
         .lock()
@@ -238,14 +247,14 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
             warps.retain(|k, _| k.0 != id2);
             warps.insert((id2.clone(), geometry_key), geometry.clone());
         }
-        let (map, f) = match &tiles {
+        let (map, f, redrawn) = match &tiles {
             Some(t) => {
-                let mut fm = t.feature_map(ch.width as usize, ch.height as usize);
-                fm.cut_by(&geometry.warp.map);
-                (fm.normal_map(), Some(fm.f()))
+                let (map, f, rows) = tile_map(t, &geometry, previous.as_deref());
+                (map, Some(f), rows)
             }
-            None => (geometry.warp.map.clone(), None),
+            None => (geometry.warp.map.clone(), None, None),
         };
+        let drawn_from = tiles.clone().filter(|_| centre.is_none());
         // A projected panorama (seed 001): the tile screen's directions, or the geometry's
         // wall points where no screen moved them, seen from the canvas's centre.
         let map = match centre {
@@ -261,6 +270,8 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
             geometry,
             map,
             f,
+            drawn_from,
+            redrawn,
             exr: Default::default(),
         }))
     })
@@ -284,5 +295,37 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
         canvas,
         computed,
         key,
+        computed_in: Some(started.elapsed()),
     })
+}
+
+/// A tile screen's map and f for a channel. After an edit of the screen the channel's previous
+/// warp was drawn from (on the same geometry), only the rows the edit changed are drawn again,
+/// into copies of the previous map and f (the rows, returned): the same values as drawing it
+/// all, in a fraction of the time when an edit moves a few features.
+fn tile_map(
+    t: &crate::tiles::TileScreen,
+    geometry: &Arc<Geometry>,
+    previous: Option<&Computed>,
+) -> (
+    crate::normalmap::NormalMap,
+    Vec<f32>,
+    Option<std::ops::Range<usize>>,
+) {
+    let mask = &geometry.warp.map;
+    let (w, h) = (mask.width(), mask.height());
+    let draw = |rows: std::ops::Range<usize>| {
+        let mut fm = t.feature_rows(w, h, rows);
+        fm.cut_by(mask);
+        fm
+    };
+    if let Some(p) = previous.filter(|p| Arc::ptr_eq(&p.geometry, geometry))
+        && let (Some(before), Some(f)) = (&p.drawn_from, &p.f)
+        && let Some(rows) = before.rows_changed(t, h)
+        && let Some((map, f)) = draw(rows.clone()).spliced(&p.map, f)
+    {
+        return (map, f, Some(rows));
+    }
+    let fm = draw(0..h);
+    (fm.normal_map(), fm.f(), None)
 }

@@ -1,14 +1,22 @@
 //! Computed warps kept on disk (`warps/<id>-<hash>.exr`) so a restarted daemon serves them
-//! without recomputing: written after the answer that computed them, by one thread.
+//! without recomputing: written after the answer that computed them, by one thread, once the
+//! channel has had no newer warp for [`QUIET`].
 
 use super::cache::Computed;
 use crate::image_io::atomic_write;
 use std::sync::{Arc, Condvar, Mutex, Once};
+use std::time::{Duration, Instant};
 
 /// Where a channel's warp computed from inputs with hash `key` is kept.
 pub fn warp_file(id: &str, key: u64) -> String {
     format!("warps/{id}-{key:016x}.exr")
 }
+
+/// How long a channel's newest warp waits before it is written. While a technician edits,
+/// each edit's warp replaces the last one waiting, so the writing (a 1080p warp is 32 MB of
+/// EXR, encoded and synced) does not take a core from the previews of the edits that follow;
+/// it is a cache for a restart, which recomputes whatever was not yet written.
+const QUIET: Duration = Duration::from_secs(1);
 
 /// Writes computed warps to disk in the background, one at a time, the newest per channel.
 pub struct Keeper {
@@ -23,6 +31,8 @@ struct Keep {
     key: u64,
     computed: Arc<Computed>,
     revisions: (u64, u64),
+    /// When it was queued.
+    at: Instant,
 }
 
 impl Default for Keeper {
@@ -54,10 +64,24 @@ impl Keeper {
                         let next = {
                             let (lock, ready) = &*pending;
                             let mut queue = lock.lock().expect("keeper lock");
-                            while queue.is_empty() {
-                                queue = ready.wait(queue).expect("keeper lock");
+                            // The oldest first: a newer warp of a channel replaces its
+                            // waiting one at the back of the queue.
+                            loop {
+                                let waited = match queue.first() {
+                                    Some(k) => k.at.elapsed(),
+                                    None => {
+                                        queue = ready.wait(queue).expect("keeper lock");
+                                        continue;
+                                    }
+                                };
+                                if waited >= QUIET {
+                                    break queue.remove(0);
+                                }
+                                queue = ready
+                                    .wait_timeout(queue, QUIET - waited)
+                                    .expect("keeper lock")
+                                    .0;
                             }
-                            queue.remove(0)
                         };
                         let (r, t) = next.revisions;
                         keep_warp(&next.dir, &next.id, next.key, &next.computed, r, t);
@@ -76,6 +100,7 @@ impl Keeper {
             key,
             computed,
             revisions: (rig_revision, tiles_revision),
+            at: Instant::now(),
         });
         ready.notify_one();
     }

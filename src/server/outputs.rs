@@ -293,7 +293,7 @@ pub async fn render(
     let (ow, oh) = (w.div_ceil(k), h.div_ceil(k));
     check_preview_size(ow, oh)?;
     let etag = j.etag();
-    let (computed, key) = (j.computed.clone(), j.key);
+    let (computed, key, warp_time) = (j.computed.clone(), j.key, j.computed_in);
     let state = s.clone();
     let (bytes, made) = run_job(&s, move |cancel| {
         let ask = Ask {
@@ -314,11 +314,23 @@ pub async fn render(
             let img = prepared.frame()?;
             let framed = t.elapsed();
             let png = png_bytes_with(&img, compression)?;
-            let timing = [
-                ("prepare", ready),
-                ("frame", framed - ready),
-                ("encode", t.elapsed() - framed),
-            ];
+            // The warp's own time where this request computed it (after an edit), and the
+            // rows of a tile screen it drew again.
+            let warp = warp_time.map(|d| {
+                let desc = match &computed.redrawn {
+                    Some(r) => format!(";desc=\"rows {}-{}\"", r.start, r.end),
+                    None => String::new(),
+                };
+                (format!("warp{desc}"), d)
+            });
+            let timing: Vec<(String, _)> = warp
+                .into_iter()
+                .chain([
+                    ("prepare".to_string(), ready),
+                    ("frame".to_string(), framed - ready),
+                    ("encode".to_string(), t.elapsed() - framed),
+                ])
+                .collect();
             return Ok((png, Some((made, timing))));
         }
         let grid = Grid::new(w, h, k);

@@ -155,6 +155,9 @@ impl Grid {
 
     /// The picked values of a per-pixel array of the channel.
     pub fn values<T: Copy + Send + Sync>(&self, full: &[T]) -> Vec<T> {
+        if self.k == 1 {
+            return full.to_vec();
+        }
         let mut out = Vec::with_capacity(self.ow * self.oh);
         for j in 0..self.oh {
             out.extend((0..self.ow).map(|i| full[self.pick(i, j)]));
@@ -190,9 +193,15 @@ impl Grid {
     /// The preview rows whose picked pixels differ between two maps of the channel.
     fn changed(&self, a: &NormalMap, b: &NormalMap) -> std::ops::Range<usize> {
         let (a, b) = (&a.pixels().data, &b.pixels().data);
-        let differs = |j: usize| (0..self.ow).any(|i| a[self.pick(i, j)] != b[self.pick(i, j)]);
-        let first = (0..self.oh).find(|&j| differs(j));
-        let last = (0..self.oh).rev().find(|&j| differs(j));
+        let differs = |j: usize| {
+            if self.k == 1 {
+                let row = j * self.w..(j + 1) * self.w;
+                return a[row.clone()] != b[row];
+            }
+            (0..self.ow).any(|i| a[self.pick(i, j)] != b[self.pick(i, j)])
+        };
+        let first = (0..self.oh).into_par_iter().find_first(|&j| differs(j));
+        let last = (0..self.oh).into_par_iter().find_last(|&j| differs(j));
         match (first, last) {
             (Some(first), Some(last)) => first..last + 1,
             _ => 0..0,

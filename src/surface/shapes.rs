@@ -15,6 +15,7 @@ fn full_arc() -> [f64; 2] {
 }
 
 /// The two roots of a·t² + b·t + c = 0 in increasing order, computed stably.
+#[inline(always)]
 fn roots(a: f64, b: f64, c: f64) -> Option<(f64, f64)> {
     let disc = b * b - 4.0 * a * c;
     if a.abs() < 1e-15 || disc < 0.0 {
@@ -83,14 +84,46 @@ impl Cylinder {
     }
 
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
-        let (a, front, right) = self.frame();
-        let o = origin - DVec3::from_array(self.centre);
+        self.prepare().intersect(origin, dir)
+    }
+
+    /// The cylinder with its frame built once, for loops that hit many rays against it.
+    pub fn prepare(&self) -> PreparedCylinder<'_> {
+        let (axis, front, right) = self.frame();
+        PreparedCylinder {
+            c: self,
+            axis,
+            front,
+            right,
+            centre: DVec3::from_array(self.centre),
+            // atan2 lies within ±180° (±π turns into exactly ±180.0), so a whole turn needs
+            // no azimuth, and most cylinders in use are lit all round or nearly.
+            whole_turn: self.arc[0] <= -180.0 && self.arc[1] >= 180.0,
+        }
+    }
+}
+
+/// A [`Cylinder`] and what every ray's test shares.
+pub struct PreparedCylinder<'a> {
+    c: &'a Cylinder,
+    axis: DVec3,
+    front: DVec3,
+    right: DVec3,
+    centre: DVec3,
+    whole_turn: bool,
+}
+
+impl PreparedCylinder<'_> {
+    #[inline(always)]
+    pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
+        let (c, a) = (self.c, self.axis);
+        let o = origin - self.centre;
         let dp = dir - a * dir.dot(a);
         let op = o - a * o.dot(a);
         let Some((t1, t2)) = roots(
             dp.dot(dp),
             2.0 * dp.dot(op),
-            op.dot(op) - self.radius * self.radius,
+            op.dot(op) - c.radius * c.radius,
         ) else {
             return Hit::Miss;
         };
@@ -101,13 +134,19 @@ impl Cylinder {
             let p = o + dir * t;
             let h = p.dot(a);
             let radial = p - a * h;
-            let az = radial.dot(right).atan2(radial.dot(front)).to_degrees();
-            if h >= self.height[0] && h <= self.height[1] && az >= self.arc[0] && az <= self.arc[1]
-            {
-                return classify(origin, dir, t, radial / self.radius);
+            if h >= c.height[0] && h <= c.height[1] && (self.whole_turn || self.in_arc(radial)) {
+                return classify(origin, dir, t, radial / c.radius);
             }
         }
         Hit::Miss
+    }
+
+    fn in_arc(&self, radial: DVec3) -> bool {
+        let az = radial
+            .dot(self.right)
+            .atan2(radial.dot(self.front))
+            .to_degrees();
+        az >= self.c.arc[0] && az <= self.c.arc[1]
     }
 }
 
@@ -155,7 +194,33 @@ impl Dome {
     }
 
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
-        let o = origin - DVec3::from_array(self.centre);
+        self.prepare().intersect(origin, dir)
+    }
+
+    /// The dome with its zenith and rim computed once.
+    pub fn prepare(&self) -> PreparedDome {
+        PreparedDome {
+            centre: DVec3::from_array(self.centre),
+            radius: self.radius,
+            zenith: self.zenith(),
+            lowest: self.min_elevation.to_radians().sin(),
+        }
+    }
+}
+
+/// A [`Dome`] and what every ray's test shares.
+pub struct PreparedDome {
+    centre: DVec3,
+    radius: f64,
+    zenith: DVec3,
+    /// The sine of the lowest elevation lit.
+    lowest: f64,
+}
+
+impl PreparedDome {
+    #[inline(always)]
+    pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
+        let o = origin - self.centre;
         let Some((t1, t2)) = roots(
             dir.dot(dir),
             2.0 * dir.dot(o),
@@ -163,14 +228,12 @@ impl Dome {
         ) else {
             return Hit::Miss;
         };
-        let zenith = self.zenith();
-        let lowest = self.min_elevation.to_radians().sin();
         for t in [t1, t2] {
             if t <= EPS {
                 continue;
             }
             let p = (o + dir * t) / self.radius;
-            if p.dot(zenith) >= lowest {
+            if p.dot(self.zenith) >= self.lowest {
                 return classify(origin, dir, t, p);
             }
         }
@@ -216,8 +279,36 @@ impl Plane {
     }
 
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
+        self.prepare().intersect(origin, dir)
+    }
+
+    /// The plane with its frame built once.
+    pub fn prepare(&self) -> PreparedPlane {
         let (n, up, right) = self.frame();
-        let c = DVec3::from_array(self.centre);
+        PreparedPlane {
+            centre: DVec3::from_array(self.centre),
+            n,
+            up,
+            right,
+            half: [self.width / 2.0, self.height / 2.0],
+        }
+    }
+}
+
+/// A [`Plane`] and what every ray's test shares.
+pub struct PreparedPlane {
+    centre: DVec3,
+    n: DVec3,
+    up: DVec3,
+    right: DVec3,
+    /// Half the width and half the height.
+    half: [f64; 2],
+}
+
+impl PreparedPlane {
+    #[inline(always)]
+    pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
+        let (c, n) = (self.centre, self.n);
         let denom = dir.dot(n);
         if denom.abs() < 1e-15 {
             return Hit::Miss;
@@ -227,7 +318,7 @@ impl Plane {
             return Hit::Miss;
         }
         let p = origin + dir * t - c;
-        if p.dot(right).abs() <= self.width / 2.0 && p.dot(up).abs() <= self.height / 2.0 {
+        if p.dot(self.right).abs() <= self.half[0] && p.dot(self.up).abs() <= self.half[1] {
             classify(origin, dir, t, n)
         } else {
             Hit::Miss

@@ -177,6 +177,27 @@ impl TileScreen {
 
     /// Every triangle, with a name for error messages.
     pub fn triangles(&self) -> Vec<([Feature; 3], String)> {
+        let columns = match &self.layout {
+            Layout::Grid { columns, .. } => Some(columns.saturating_sub(1).max(1)),
+            Layout::Soup { .. } => None,
+        };
+        self.corners()
+            .into_iter()
+            .enumerate()
+            .map(|(n, t)| {
+                let name = match columns {
+                    // Two triangles a quad, quads row by row.
+                    Some(c) => format!("tile ({}, {})", (n / 2) % c, (n / 2) / c),
+                    None => format!("triangle {n}"),
+                };
+                (t, name)
+            })
+            .collect()
+    }
+
+    /// Every triangle's corners, in drawing order: a grid's quads row by row, each split
+    /// along its (k, l)–(k+1, l+1) diagonal.
+    pub fn corners(&self) -> Vec<[Feature; 3]> {
         match &self.layout {
             Layout::Grid {
                 columns,
@@ -188,17 +209,13 @@ impl TileScreen {
                     for k in 0..columns.saturating_sub(1) {
                         let at = |k: usize, l: usize| features[l * columns + k];
                         let (a, b, c, d) = (at(k, l), at(k + 1, l), at(k + 1, l + 1), at(k, l + 1));
-                        out.push(([a, b, c], format!("tile ({k}, {l})")));
-                        out.push(([a, c, d], format!("tile ({k}, {l})")));
+                        out.push([a, b, c]);
+                        out.push([a, c, d]);
                     }
                 }
                 out
             }
-            Layout::Soup { triangles } => triangles
-                .iter()
-                .enumerate()
-                .map(|(i, t)| (*t, format!("triangle {i}")))
-                .collect(),
+            Layout::Soup { triangles } => triangles.clone(),
         }
     }
 

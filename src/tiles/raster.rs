@@ -35,12 +35,16 @@ use crate::normalmap::NormalMap;
 use crate::raster::Raster;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::ops::Range;
 
-/// Per pixel the view direction N and the interpolated f, `None` where no tile covers it.
+/// Per pixel the view direction N and the interpolated f, `None` where no tile covers it: the
+/// whole screen, or rows `top..top + height` of it.
 #[derive(Debug, Clone)]
 pub struct FeatureMap {
     pub width: usize,
     pub height: usize,
+    /// The screen row the first row of `data` is (0 for a whole map).
+    pub top: usize,
     pub data: Vec<Option<(DVec3, f64)>>,
 }
 
@@ -93,14 +97,23 @@ impl TileScreen {
 
     /// Rasterises the tile screen at width × height pixel centres, cut by its [`Self::mask`].
     pub fn feature_map(&self, width: usize, height: usize) -> FeatureMap {
-        let mut map = self.unmasked_feature_map(width, height);
+        self.feature_rows(width, height, 0..height)
+    }
+
+    /// Rows `rows` of [`Self::feature_map`], the same values: what a tile edit recomputes
+    /// (see [`Self::rows_changed`]). Each pixel is drawn by the same triangles in the same
+    /// order whichever rows are asked for.
+    pub fn feature_rows(&self, width: usize, height: usize, rows: Range<usize>) -> FeatureMap {
+        let rows = rows.start.min(height)..rows.end.min(height);
+        let mut map = self.unmasked_rows(width, height, rows.clone());
         if self.source.is_some() {
             let mask = self.mask();
             let (w, h) = (width as f64, height as f64);
             map.data
-                .par_chunks_mut(width)
+                .par_chunks_mut(width.max(1))
                 .enumerate()
-                .for_each(|(j, row)| {
+                .for_each(|(r, row)| {
+                    let j = rows.start + r;
                     for (i, p) in row.iter_mut().enumerate() {
                         if p.is_some() && !mask((i as f64 + 0.5) / w, (j as f64 + 0.5) / h) {
                             *p = None;
@@ -111,48 +124,79 @@ impl TileScreen {
         map
     }
 
-    fn unmasked_feature_map(&self, width: usize, height: usize) -> FeatureMap {
+    /// The rows of a raster `height` pixels high in which `next`'s feature map can differ
+    /// from this screen's: those any changed triangle covers, before or after the change (a
+    /// pixel shows the last triangle drawn over it, and only changed triangles changed).
+    /// `None` where the screens differ in more than their features' values (the layout's
+    /// shape, the source, the interpolation): every row then.
+    pub fn rows_changed(&self, next: &TileScreen, height: usize) -> Option<Range<usize>> {
+        if self.source != next.source || self.interpolation != next.interpolation {
+            return None;
+        }
+        let (a, b) = (self.corners(), next.corners());
+        if a.len() != b.len() || height == 0 {
+            return None;
+        }
+        let mut changed: Option<Range<usize>> = None;
+        for (s, t) in a.iter().zip(&b).filter(|(s, t)| s != t) {
+            for tri in [s, t] {
+                let (y0, y1) = row_extent(tri, height);
+                changed = Some(match changed {
+                    Some(c) => c.start.min(y0)..c.end.max(y1 + 1),
+                    None => y0..y1 + 1,
+                });
+            }
+        }
+        Some(changed.unwrap_or(0..0))
+    }
+
+    fn unmasked_rows(&self, width: usize, height: usize, rows: Range<usize>) -> FeatureMap {
+        if rows.is_empty() {
+            return FeatureMap {
+                width,
+                height: 0,
+                top: rows.start,
+                data: Vec::new(),
+            };
+        }
         let (w, h) = (width as f64, height as f64);
         let tris: Vec<Prepared> = self
-            .triangles()
+            .corners()
             .into_iter()
-            .filter(|(t, _)| t.iter().all(|f| f.valid))
-            .map(|(mut t, _)| {
+            .filter(|t| t.iter().all(|f| f.valid))
+            .map(|mut t| {
                 t[1].phi = unwrap_deg(t[1].phi, t[0].phi);
                 t[2].phi = unwrap_deg(t[2].phi, t[0].phi);
                 let xs = t.map(|f| f.x * w - 0.5);
-                let ys = t.map(|f| f.y * h - 0.5);
-                let lo = |v: [f64; 3]| {
-                    v.iter().copied().fold(f64::MAX, f64::min).floor().max(0.0) as usize
-                };
-                let hi = |v: [f64; 3], n: usize| {
-                    (v.iter().copied().fold(f64::MIN, f64::max).ceil().max(0.0) as usize).min(n - 1)
-                };
+                let (y0, y1) = row_extent(&t, height);
                 Prepared {
                     corners: t,
                     normals: t.map(|f| f.weight * f_normal(f.phi, f.theta, f.scale)),
                     area2: 2.0 * super::signed_area(&t[0], &t[1], &t[2]),
-                    x0: lo(xs),
-                    x1: hi(xs, width),
-                    y0: lo(ys),
-                    y1: hi(ys, height),
+                    x0: lowest(xs),
+                    x1: highest(xs, width),
+                    y0,
+                    y1,
                 }
             })
+            .filter(|t| t.y0 < rows.end && t.y1 >= rows.start)
             .collect();
         let interpolation = self.interpolation;
         // Which triangles touch each band of rows, in drawing order.
-        let mut bands = vec![Vec::new(); height.div_ceil(BAND)];
+        let mut bands = vec![Vec::new(); rows.len().div_ceil(BAND)];
         for (n, t) in tris.iter().enumerate() {
-            for b in bands.iter_mut().take(t.y1 / BAND + 1).skip(t.y0 / BAND) {
+            let (first, last) = (t.y0.max(rows.start), t.y1.min(rows.end - 1));
+            for b in &mut bands[(first - rows.start) / BAND..=(last - rows.start) / BAND] {
                 b.push(n);
             }
         }
-        let mut data = vec![None; width * height];
-        data.par_chunks_mut(width * BAND)
+        let mut data = vec![None; width * rows.len()];
+        data.par_chunks_mut((width * BAND).max(1))
             .zip(bands.par_iter())
             .enumerate()
             .for_each(|(b, (band, mine))| {
-                let (r0, r1) = (b * BAND, b * BAND + band.len() / width);
+                let r0 = rows.start + b * BAND;
+                let r1 = r0 + band.len() / width;
                 for t in mine.iter().map(|&n| &tris[n]) {
                     let [a, bb, c] = &t.corners;
                     for j in t.y0.max(r0)..=t.y1.min(r1 - 1) {
@@ -186,22 +230,39 @@ impl TileScreen {
             });
         FeatureMap {
             width,
-            height,
+            height: rows.len(),
+            top: rows.start,
             data,
         }
     }
+}
+
+/// The first and last pixel row (of `height`) a triangle's bounding box reaches.
+fn row_extent(t: &[Feature; 3], height: usize) -> (usize, usize) {
+    let h = height as f64;
+    let ys = t.map(|f| f.y * h - 0.5);
+    (lowest(ys), highest(ys, height))
+}
+
+fn lowest(v: [f64; 3]) -> usize {
+    v.iter().copied().fold(f64::MAX, f64::min).floor().max(0.0) as usize
+}
+
+fn highest(v: [f64; 3], n: usize) -> usize {
+    (v.iter().copied().fold(f64::MIN, f64::max).ceil().max(0.0) as usize).min(n - 1)
 }
 
 impl FeatureMap {
     /// Leaves only the pixels `mask` also covers: a channel's tiles are cut where the
     /// projector's light leaves the wall, which the tile grid only approximates.
     pub fn cut_by(&mut self, mask: &NormalMap) {
+        let top = self.top;
         self.data
-            .par_chunks_mut(self.width)
+            .par_chunks_mut(self.width.max(1))
             .enumerate()
-            .for_each(|(j, row)| {
+            .for_each(|(r, row)| {
                 for (i, p) in row.iter_mut().enumerate() {
-                    if !mask.covers(i, j) {
+                    if !mask.covers(i, top + r) {
                         *p = None;
                     }
                 }
@@ -213,26 +274,50 @@ impl FeatureMap {
         let pixels = Raster {
             width: self.width,
             height: self.height,
-            data: self
-                .data
-                .par_iter()
-                .map(|p| match p {
-                    Some((n, _)) => [n.x as f32, n.y as f32, n.z as f32, 1.0],
-                    None => [0.0; 4],
-                })
-                .collect(),
+            data: self.data.par_iter().map(normal_pixel).collect(),
         };
-        NormalMap::from_pixels(pixels, vec![("omniwarp.projection".into(), "tiles".into())])
+        NormalMap::from_pixels(pixels, normal_map_attributes())
             .expect("f_normal gives finite unit vectors")
     }
 
     /// The custom value f per pixel (1 where nothing is covered).
     pub fn f(&self) -> Vec<f32> {
-        self.data
-            .par_iter()
-            .map(|p| p.map_or(1.0, |(_, f)| f as f32))
-            .collect()
+        self.data.par_iter().map(f_value).collect()
     }
+
+    /// A whole screen's normal map and f with these rows put in: what drawing the whole
+    /// screen again would give, when only these rows changed. `None` where the sizes do not
+    /// fit.
+    pub fn spliced(&self, map: &NormalMap, f: &[f32]) -> Option<(NormalMap, Vec<f32>)> {
+        let start = self.top * self.width;
+        let end = start + self.data.len();
+        if map.width() != self.width || f.len() != map.pixels().data.len() || end > f.len() {
+            return None;
+        }
+        let rows: Vec<[f32; 4]> = self.data.par_iter().map(normal_pixel).collect();
+        let map = map.with_rows(self.top, &rows).ok()?;
+        let mut f = f.to_vec();
+        f[start..end]
+            .par_iter_mut()
+            .zip(&self.data)
+            .for_each(|(v, d)| *v = f_value(d));
+        Some((map, f))
+    }
+}
+
+fn normal_pixel(p: &Option<(DVec3, f64)>) -> [f32; 4] {
+    match p {
+        Some((n, _)) => [n.x as f32, n.y as f32, n.z as f32, 1.0],
+        None => [0.0; 4],
+    }
+}
+
+fn f_value(p: &Option<(DVec3, f64)>) -> f32 {
+    p.map_or(1.0, |(_, f)| f as f32)
+}
+
+fn normal_map_attributes() -> Vec<(String, String)> {
+    vec![("omniwarp.projection".into(), "tiles".into())]
 }
 
 /// Seed 000's Figure 5 effect: saturation scaled by f (0 grey, 1 unchanged), per pixel.

@@ -70,6 +70,7 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     // Warm the caches, then renders alone.
     renders(addr, "centre", 1)?;
     let mut quiet = renders(addr, "centre", a.renders)?;
+    after_edits(addr, a.renders)?;
 
     let editing = Arc::new(AtomicBool::new(true));
     let t = Instant::now();
@@ -161,6 +162,80 @@ pub fn run(a: ServeBenchArgs) -> Result<()> {
     hostile(addr)?;
     daemon.stop()?;
     largest_rig()?;
+    Ok(())
+}
+
+/// A preview after each of `n` edits moving one feature of `centre` by half a degree, on its
+/// own: how long the edit's preview takes, and where its time went (the daemon's
+/// Server-Timing), against the frame of a preview with nothing to redo.
+fn after_edits(addr: SocketAddr, n: usize) -> Result<()> {
+    let mut c = Client::new(addr, None);
+    let timing = |r: &omniwarp::server::client::Reply, name: &str| -> f64 {
+        // "name;desc=\"…\";dur=1.23, …"
+        let entry = r
+            .header("server-timing")
+            .and_then(|t| t.split(", ").find(|e| e.split(';').next() == Some(name)));
+        entry
+            .and_then(|e| e.split(';').find_map(|p| p.strip_prefix("dur=")))
+            .and_then(|d| d.parse().ok())
+            .unwrap_or(0.0)
+    };
+    let path = "/v1/channels/centre/render?scale=1";
+    let (mut total, mut warp, mut frame, mut kept_frame, mut how) = (
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        String::new(),
+    );
+    for k in 0..n {
+        let revision = c.get("/v1/channels/centre/tiles")?.revision().unwrap_or(1);
+        let phi = if k % 2 == 0 { 0.5 } else { 0.0 };
+        let body = serde_json::json!({"edits": [{"op": "set_feature", "column": 16, "row": 9, "phi": phi}]});
+        let r = c.send(
+            "PATCH",
+            "/v1/channels/centre/tiles",
+            &[("If-Match", &format!("\"{revision}\""))],
+            body.to_string().as_bytes(),
+        )?;
+        if r.status != 200 {
+            bail!("edit: status {}", r.status);
+        }
+        let t = Instant::now();
+        let r = c.get(path)?;
+        total.push(t.elapsed().as_secs_f64() * 1e3);
+        if r.status != 200 {
+            bail!("render after an edit: status {}", r.status);
+        }
+        warp.push(timing(&r, "warp"));
+        frame.push(timing(&r, "frame"));
+        how = r.header("x-omniwarp-preview").unwrap_or("?").to_string();
+        // The same preview again: kept, its frame alone.
+        kept_frame.push(timing(&c.get(path)?, "frame"));
+    }
+    // What the tile warp cost when every edit drew the whole screen: the same screen drawn
+    // whole here, in this process.
+    let screen: omniwarp::tiles::TileScreen =
+        serde_json::from_value(c.get("/v1/channels/centre/tiles")?.json()["tiles"].take())?;
+    let mut whole: Vec<f64> = (0..5)
+        .map(|_| {
+            let t = Instant::now();
+            let fm = screen.feature_map(1920, 1080);
+            std::hint::black_box((fm.normal_map(), fm.f()));
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let f = percentile(&mut kept_frame, 0.5);
+    let p = percentile(&mut total, 0.5);
+    outln!(
+        "1080p preview after a one-feature move ({n} edits): p50 {p:.0} ms = {:.1}× the frame \
+         ({f:.1} ms); the tile warp p50 {:.1} ms (the whole screen drawn: {:.1} ms), the \
+         frame {:.1} ms; made from {how}",
+        p / f,
+        percentile(&mut warp, 0.5),
+        percentile(&mut whole, 0.5),
+        percentile(&mut frame, 0.5),
+    );
     Ok(())
 }
 
