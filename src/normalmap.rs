@@ -30,6 +30,20 @@ pub struct NormalMap {
 const UNIT_TOLERANCE: f32 = 2e-3;
 
 /// What is wrong with a normal-map pixel, if anything.
+/// The first bad pixel of `rows` (`width` wide, the first of them row `top` of the map), as
+/// the reason to report; rows are checked in parallel (a 4K map is 8 million pixels).
+fn first_problem(rows: &[[f32; 4]], width: usize, top: usize) -> Option<String> {
+    use rayon::prelude::*;
+    rows.par_chunks(width.max(1))
+        .enumerate()
+        .find_map_first(|(r, row)| {
+            row.iter().enumerate().find_map(|(i, p)| {
+                let problem = pixel_problem(p)?;
+                Some(format!("pixel ({i}, {}) {problem}", top + r))
+            })
+        })
+}
+
 fn pixel_problem(p: &[f32; 4]) -> Option<String> {
     if p.iter().any(|c| !c.is_finite()) {
         return Some(format!("holds a non-finite value {p:?}"));
@@ -77,20 +91,7 @@ impl NormalMap {
         pixels: Raster<[f32; 4]>,
         attributes: Vec<(String, String)>,
     ) -> Result<Self> {
-        use rayon::prelude::*;
-        let w = pixels.width.max(1);
-        // Rows in parallel (a 4K map is 8 million pixels); the first bad pixel is reported.
-        let bad = pixels
-            .data
-            .par_chunks(w)
-            .enumerate()
-            .find_map_first(|(j, row)| {
-                row.iter().enumerate().find_map(|(i, p)| {
-                    let problem = pixel_problem(p)?;
-                    Some(format!("pixel ({i}, {j}) {problem}"))
-                })
-            });
-        match bad {
+        match first_problem(&pixels.data, pixels.width, 0) {
             Some(reason) => Err(Error::invalid("normal-map", reason)),
             None => Ok(NormalMap { pixels, attributes }),
         }
@@ -112,17 +113,12 @@ impl NormalMap {
                 ),
             ));
         }
-        let bad = rows.par_chunks(w).enumerate().find_map_first(|(r, row)| {
-            row.iter().enumerate().find_map(|(i, p)| {
-                let problem = pixel_problem(p)?;
-                Some(format!("pixel ({i}, {}) {problem}", top + r))
-            })
-        });
-        if let Some(reason) = bad {
+        if let Some(reason) = first_problem(rows, w, top) {
             return Err(Error::invalid("normal-map", reason));
         }
         // Copied in parallel, a band of rows a task: a 1080p map is 33 MB.
         let old = &self.pixels.data;
+        let end = start + rows.len();
         let mut data = Vec::with_capacity(old.len());
         data.spare_capacity_mut()[..old.len()]
             .par_chunks_mut(w * 64)
@@ -131,12 +127,11 @@ impl NormalMap {
                 let at = b * w * 64;
                 for (n, o) in out.iter_mut().enumerate() {
                     let k = at + n;
-                    let from = if (start..start + rows.len()).contains(&k) {
+                    o.write(if (start..end).contains(&k) {
                         rows[k - start]
                     } else {
                         old[k]
-                    };
-                    o.write(from);
+                    });
                 }
             });
         // SAFETY: every element of the first `old.len()` was written above.

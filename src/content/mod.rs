@@ -70,6 +70,22 @@ pub trait Locate: Sync {
     fn bounds(&self) -> Option<[f64; 4]> {
         None
     }
+
+    /// Whether `locate` is cheap and bounded in its derivatives, continuous but across seams
+    /// [`Locate::near_a_seam`] can point out: a cube map, whose faces meet at seams and whose
+    /// lookup is a face choice and a division. Plans then interpolate directions, not
+    /// positions, over the cells a seam crosses. A panorama's lookup is trigonometry and
+    /// unbounded at its poles, so it says no.
+    fn has_seams(&self) -> bool {
+        false
+    }
+
+    /// Whether atlas position (x, y), as `locate` gives it, lies within `margin` texels of a
+    /// seam: there a direction a little off could be located on the other side.
+    fn near_a_seam(&self, x: f64, y: f64, margin: f64) -> bool {
+        let _ = (x, y, margin);
+        false
+    }
 }
 
 fn panorama_fov(name: &str, deg: f64, max: f64) -> Result<f64> {
@@ -260,6 +276,25 @@ impl<T: Pixel> Locate for Content<T> {
                 Some((u * w as f64 - 0.5 + pad, v * h as f64 - 0.5 + pad))
             }
         }
+    }
+
+    fn has_seams(&self) -> bool {
+        matches!(self.kind, Kind::Cube { .. })
+    }
+
+    #[inline]
+    fn near_a_seam(&self, x: f64, y: f64, margin: f64) -> bool {
+        let Kind::Cube { n } = self.kind else {
+            return false;
+        };
+        // Faces are stacked top to bottom, each in a border of PAD texels; `locate` gives
+        // positions from PAD − ½ to PAD − ½ + n on both axes of its face.
+        let (lo, hi) = (PAD as f64 - 0.5 + margin, (n + PAD) as f64 - 0.5 - margin);
+        // Positions are never negative, so truncation finds the face (`%` on floats and
+        // `floor` are library calls on baseline x86-64).
+        let block = (n + 2 * PAD) as f64;
+        let y = y - f64::from((y / block) as u32) * block;
+        x <= lo || x >= hi || y <= lo || y >= hi
     }
 
     fn bounds(&self) -> Option<[f64; 4]> {

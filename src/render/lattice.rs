@@ -16,12 +16,20 @@
 //! between cube faces, the ±180° wrap of a panorama, poles, the edge of a fisheye's circle or of
 //! a partial panorama, kinks in an edited normal map) are computed exactly, sample by sample.
 //!
+//! Where positions jump but directions do not — a cube map's face edges — a cell can still be
+//! interpolated in directions, when the content says locating a direction is cheap and
+//! continuous but for seams it can point out ([`Locate::near_a_seam`]): the direction is
+//! interpolated from the same stencil, located sample by sample (a face choice and a division,
+//! no trigonometry), and recomputed exactly within [`SEAM_MARGIN`] of a seam. The same check
+//! admits such a cell, against the same exact positions.
+//!
 //! What must not move at all is exact too: coverage (a normal map's holes and a partial
 //! panorama's edge are checked per sample) and, for nearest filtering, the texel a sample picks
 //! (samples within [`BOUND`] of a rounding boundary are computed exactly).
 
 use super::{Warp, subsample};
 use crate::content::Locate;
+use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -36,7 +44,23 @@ const ACCEPT: f64 = 1.0 / 4096.0;
 /// sample differ from the exact plan's by at most one step, and only at rounding boundaries.
 pub const BOUND: f64 = 1.0 / 1024.0;
 
+/// How close to a content seam an interpolated position may come before the sample is computed
+/// exactly, in texels: twice the bound, so that a position on the wrong side of a seam, which
+/// is at most [`BOUND`] from the exact one across it, always falls inside.
+const SEAM_MARGIN: f64 = 2.0 * BOUND;
+
 type Pos = Option<(f64, f64)>;
+type Dir = Option<DVec3>;
+
+/// How the samples of a lattice cell get their positions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Cell {
+    Exact,
+    /// Positions interpolated.
+    Positions,
+    /// Directions interpolated, then located.
+    Directions,
+}
 
 /// Lagrange weights of a sample over its stencil of four lattice nodes along one axis.
 #[derive(Debug, Clone, Copy)]
@@ -85,6 +109,16 @@ fn stencils(nodes: &[usize], n: usize) -> Vec<Stencil> {
         .collect()
 }
 
+/// Along a row, a cell's values are the cubic through its four node columns: the value at a
+/// sample with weights `w`.
+#[inline(always)]
+fn cubic<V>(nodes: &[V], w: &[f64; 4]) -> V
+where
+    V: Copy + std::ops::Add<Output = V> + std::ops::Mul<f64, Output = V>,
+{
+    nodes[0] * w[0] + nodes[1] * w[1] + nodes[2] * w[2] + nodes[3] * w[3]
+}
+
 /// The sample rows (of `n`) whose positions can change when the warp changes in rows `changed`:
 /// those whose stencil reaches into them, and the changed rows themselves.
 pub(crate) fn dependents(n: usize, changed: Range<usize>) -> Range<usize> {
@@ -116,12 +150,15 @@ pub(crate) struct Sampler<'a, L: Locate> {
     sw: usize,
     /// Exact positions at the lattice nodes, row by row; empty when the image is too small
     /// for a lattice (then every sample is exact).
-    lattice: Vec<Pos>,
+    lattice: Vec<Option<DVec2>>,
+    /// Exact directions at the lattice nodes where the content has seams to interpolate
+    /// directions across ([`Locate::has_seams`]); empty otherwise.
+    directions: Vec<Dir>,
     columns: Vec<usize>,
     col: Vec<Stencil>,
     row: Vec<Stencil>,
-    /// Whether each cell (row-major over the lattice's cells) is interpolated.
-    smooth: Vec<bool>,
+    /// How each cell (row-major over the lattice's cells) is sampled.
+    cells: Vec<Cell>,
     /// For nearest filtering: recompute exactly what lies near a texel's rounding boundary.
     nearest: bool,
     /// The content's [`Locate::bounds`].
@@ -150,10 +187,11 @@ impl<'a, L: Locate> Sampler<'a, L> {
             k,
             sw,
             lattice: Vec::new(),
+            directions: Vec::new(),
             columns: Vec::new(),
             col: Vec::new(),
             row: Vec::new(),
-            smooth: Vec::new(),
+            cells: Vec::new(),
             nearest,
             bounds: content.bounds(),
         };
@@ -175,32 +213,38 @@ impl<'a, L: Locate> Sampler<'a, L> {
             (a.cell..b.cell + 1, a.first..(b.first + 5).min(ny))
         };
         let mut lattice = vec![None; nx * ny];
-        lattice[needed.start * nx..needed.end * nx]
+        let mut directions = vec![None; nx * ny];
+        let node_rows = needed.start * nx..needed.end * nx;
+        lattice[node_rows.clone()]
             .par_chunks_mut(nx)
+            .zip(directions[node_rows].par_chunks_mut(nx))
             .zip(&rows[needed])
-            .for_each(|(line, &j)| {
-                for (p, &i) in line.iter_mut().zip(&columns) {
-                    *p = s.exact(i, j);
+            .for_each(|((positions, directions), &j)| {
+                for ((p, d), &i) in positions.iter_mut().zip(directions).zip(&columns) {
+                    *d = s.direction(i, j);
+                    *p = d.and_then(|d| s.content.locate(d)).map(DVec2::from);
                 }
             });
         s.lattice = lattice;
+        if content.has_seams() {
+            s.directions = directions;
+        }
         s.columns = columns;
-        let mut smooth = vec![false; (ny - 1) * (nx - 1)];
-        smooth[cells.start * (nx - 1)..cells.end * (nx - 1)]
+        let mut kinds = vec![Cell::Exact; (ny - 1) * (nx - 1)];
+        kinds[cells.start * (nx - 1)..cells.end * (nx - 1)]
             .par_iter_mut()
             .enumerate()
-            .for_each(|(c, smooth)| {
+            .for_each(|(c, kind)| {
                 let (cx, cy) = (c % (nx - 1), cells.start + c / (nx - 1));
-                *smooth = s.cell_is_smooth(cx, cy, &rows);
+                *kind = s.classify(cx, cy, &rows);
             });
-        s.smooth = smooth;
+        s.cells = kinds;
         s
     }
 
-    /// The exact position of sample (i, j). Kept out of line: inlined into the interpolation
-    /// loop, its register pressure slowed every interpolated sample.
-    #[inline(never)]
-    fn exact(&self, i: usize, j: usize) -> Pos {
+    /// The exact direction of sample (i, j).
+    #[inline]
+    fn direction(&self, i: usize, j: usize) -> Dir {
         let (x, y) = if self.k == 1 {
             // The common case, without the four integer divisions below.
             (i as f64 + 0.5, j as f64 + 0.5)
@@ -208,40 +252,82 @@ impl<'a, L: Locate> Sampler<'a, L> {
             let k = self.k as usize;
             subsample(i / k, j / k, (i % k) as u32, (j % k) as u32, self.k)
         };
-        self.warp
-            .direction(x, y, self.width, self.height)
-            .and_then(|v| self.content.locate(v))
+        self.warp.direction(x, y, self.width, self.height)
     }
 
-    /// The interpolated position of sample (i, j), if its cell's stencil is covered.
-    fn interpolated(&self, i: usize, j: usize) -> Pos {
+    /// The exact position of sample (i, j). Kept out of line: inlined into the interpolation
+    /// loop, its register pressure slowed every interpolated sample.
+    #[inline(never)]
+    fn exact(&self, i: usize, j: usize) -> Pos {
+        self.direction(i, j).and_then(|v| self.content.locate(v))
+    }
+
+    /// The node values around sample (i, j) blended by its stencil's weights, if all 16 are
+    /// known.
+    fn blend<V>(&self, nodes: &[Option<V>], i: usize, j: usize) -> Option<V>
+    where
+        V: Copy + Default + std::ops::Add<Output = V> + std::ops::Mul<f64, Output = V>,
+    {
         let (sx, sy) = (&self.col[i], &self.row[j]);
         let nx = self.columns.len();
-        let (mut x, mut y) = (0.0, 0.0);
+        let mut v = V::default();
         for (b, wy) in sy.weights.iter().enumerate() {
             for (a, wx) in sx.weights.iter().enumerate() {
-                let (px, py) = self.lattice[(sy.first + b) * nx + sx.first + a]?;
-                x += wy * wx * px;
-                y += wy * wx * py;
+                v = v + nodes[(sy.first + b) * nx + sx.first + a]? * (wy * wx);
             }
         }
-        Some((x, y))
+        Some(v)
     }
 
-    fn cell_is_smooth(&self, cx: usize, cy: usize, rows: &[usize]) -> bool {
+    /// The lattice's node columns interpolated down to the row of stencil `sy`, once for the
+    /// whole row (a cell's stencil is covered: checked when the cell was).
+    fn down<V>(&self, nodes: &[Option<V>], sy: &Stencil) -> Vec<V>
+    where
+        V: Copy + Default + std::ops::Add<Output = V> + std::ops::Mul<f64, Output = V>,
+    {
+        let nx = self.columns.len();
+        (0..nx)
+            .map(|c| {
+                let mut v = V::default();
+                for (b, &w) in sy.weights.iter().enumerate() {
+                    v = v + nodes[(sy.first + b) * nx + c].unwrap_or_default() * w;
+                }
+                v
+            })
+            .collect()
+    }
+
+    /// How cell (cx, cy) is sampled: positions interpolated where they agree with the exact
+    /// ones at its centre and edge midpoints within [`ACCEPT`], else directions where the
+    /// content has seams and their located positions agree so, else exactly.
+    fn classify(&self, cx: usize, cy: usize, rows: &[usize]) -> Cell {
         let (x0, x1) = (self.columns[cx], self.columns[cx + 1]);
         let (y0, y1) = (rows[cy], rows[cy + 1]);
         let (xm, ym) = ((x0 + x1) / 2, (y0 + y1) / 2);
-        [(xm, ym), (xm, y0), (x0, ym), (xm, y1), (x1, ym)]
-            .iter()
-            .all(
-                |&(i, j)| match (self.interpolated(i, j), self.exact(i, j)) {
-                    (Some(a), Some(b)) => {
-                        (a.0 - b.0).abs() <= ACCEPT && (a.1 - b.1).abs() <= ACCEPT
-                    }
-                    _ => false,
-                },
+        let points = [(xm, ym), (xm, y0), (x0, ym), (xm, y1), (x1, ym)];
+        let close = |a: Option<DVec2>, b: Pos| match (a, b) {
+            (Some(a), Some(b)) => (a.x - b.0).abs() <= ACCEPT && (a.y - b.1).abs() <= ACCEPT,
+            _ => false,
+        };
+        let mut exact: [Option<Pos>; 5] = [None; 5];
+        let mut exact_at =
+            |n: usize| *exact[n].get_or_insert_with(|| self.exact(points[n].0, points[n].1));
+        if (0..5).all(|n| {
+            close(
+                self.blend(&self.lattice, points[n].0, points[n].1),
+                exact_at(n),
             )
+        }) {
+            return Cell::Positions;
+        }
+        let located = |(i, j): (usize, usize)| {
+            let d = self.blend(&self.directions, i, j)?;
+            self.content.locate(d).map(DVec2::from)
+        };
+        if !self.directions.is_empty() && (0..5).all(|n| close(located(points[n]), exact_at(n))) {
+            return Cell::Directions;
+        }
+        Cell::Exact
     }
 
     /// The positions of sample row `j`, passed to `emit` in column order, `sw` of them.
@@ -253,26 +339,19 @@ impl<'a, L: Locate> Sampler<'a, L> {
         }
         let nx = self.columns.len();
         let sy = &self.row[j];
-        // The lattice's node columns interpolated down to this row, once for the whole row (a
-        // smooth cell's stencil is covered: checked when the cell was).
-        let blended: Vec<(f64, f64)> = (0..nx)
-            .map(|c| {
-                let (mut x, mut y) = (0.0, 0.0);
-                for (b, w) in sy.weights.iter().enumerate() {
-                    let (px, py) = self.lattice[(sy.first + b) * nx + c].unwrap_or_default();
-                    x += w * px;
-                    y += w * py;
-                }
-                (x, y)
-            })
-            .collect();
-        let smooth = &self.smooth[sy.cell * (nx - 1)..(sy.cell + 1) * (nx - 1)];
+        let cells = &self.cells[sy.cell * (nx - 1)..(sy.cell + 1) * (nx - 1)];
+        let positions: Vec<DVec2> = self.down(&self.lattice, sy);
+        let directions: Vec<DVec3> = if cells.contains(&Cell::Directions) {
+            self.down(&self.directions, sy)
+        } else {
+            Vec::new()
+        };
         // Only normal maps (never supersampled) have per-pixel holes.
         let holes = match self.warp {
             Warp::Map(map) => Some(map),
             Warp::View(_) | Warp::CubeFace(_) => None,
         };
-        for (cx, &smooth) in smooth.iter().enumerate() {
+        for (cx, &cell) in cells.iter().enumerate() {
             let start = self.columns[cx];
             // The last cell owns its right edge too.
             let end = if cx + 2 == nx {
@@ -280,27 +359,36 @@ impl<'a, L: Locate> Sampler<'a, L> {
             } else {
                 self.columns[cx + 1]
             };
-            if !smooth {
-                (start..end).for_each(|i| emit(self.exact(i, j)));
-                continue;
-            }
             let first = self.col[start].first;
-            let nodes: [(f64, f64); 4] = std::array::from_fn(|m| blended[first + m]);
-            for i in start..end {
-                if holes.is_some_and(|map| !map.covers(i, j)) {
-                    emit(None);
-                    continue;
-                }
-                let w = &self.col[i].weights;
-                let x =
-                    w[0] * nodes[0].0 + w[1] * nodes[1].0 + w[2] * nodes[2].0 + w[3] * nodes[3].0;
-                let y =
-                    w[0] * nodes[0].1 + w[1] * nodes[1].1 + w[2] * nodes[2].1 + w[3] * nodes[3].1;
-                emit(if self.near_a_boundary(x, y) {
+            let position = |i: usize| -> Pos {
+                let p = cubic(&positions[first..first + 4], &self.col[i].weights);
+                if self.near_a_boundary(p.x, p.y) {
                     self.exact(i, j)
                 } else {
+                    Some((p.x, p.y))
+                }
+            };
+            let located = |i: usize| -> Pos {
+                let d = cubic(&directions[first..first + 4], &self.col[i].weights);
+                match self.content.locate(d) {
                     Some((x, y))
-                });
+                        if !self.content.near_a_seam(x, y, SEAM_MARGIN)
+                            && !self.near_a_boundary(x, y) =>
+                    {
+                        Some((x, y))
+                    }
+                    _ => self.exact(i, j),
+                }
+            };
+            let covered = |i: usize| holes.is_none_or(|map| map.covers(i, j));
+            match cell {
+                Cell::Exact => (start..end).for_each(|i| emit(self.exact(i, j))),
+                Cell::Positions => {
+                    (start..end).for_each(|i| emit(if covered(i) { position(i) } else { None }))
+                }
+                Cell::Directions => {
+                    (start..end).for_each(|i| emit(if covered(i) { located(i) } else { None }))
+                }
             }
         }
     }
@@ -342,5 +430,113 @@ mod tests {
             );
             assert!(xs[s.cell] <= i && (i <= xs[s.cell + 1]));
         }
+    }
+
+    /// Across a cube map's face seams positions jump but directions do not: a 360° × 100°
+    /// cylinder at 3840 × 1080, crossing four seams and the edges of both caps, has its seam
+    /// cells interpolated in directions, none computed sample by sample, and every located
+    /// sample within the bound of the exact one, on the face the exact one is on, and exact
+    /// next to a seam. (At a third of the size the lattice is too coarse for the caps' edges
+    /// in either form, and some cells there are exact.)
+    #[test]
+    fn seam_cells_interpolate_directions() {
+        use crate::content::Content;
+        use crate::cubemap::CubeMap;
+        use crate::projection::{self, Orientation, Params, View};
+
+        let (w, h) = (3840u32, 1080u32);
+        let params = Params {
+            hfov: Some(360.0),
+            vfov: Some(100.0),
+            ..Params::default()
+        };
+        let projection = projection::build("cylindrical", &params, f64::from(h) / f64::from(w));
+        let view = View::new(
+            projection.unwrap(),
+            Orientation::default(),
+            DVec3::ZERO,
+            1.0,
+        );
+        let view = view.unwrap();
+        let cube = CubeMap::<[u8; 4]>::from_fn(128, 1, |_| [0; 4]);
+        let content = Content::cube(&cube);
+        let sampler = Sampler::new(
+            Warp::View(&view),
+            &content,
+            [w, h, 1],
+            false,
+            true,
+            0..h as usize,
+        );
+        let count = |kind| sampler.cells.iter().filter(|&&c| c == kind).count();
+        let (positions, directions) = (count(Cell::Positions), count(Cell::Directions));
+        assert_eq!(
+            count(Cell::Exact),
+            0,
+            "cells computed sample by sample ({directions} in directions)"
+        );
+        assert!(
+            directions > 60 && positions > directions,
+            "{directions} of {positions}"
+        );
+        let face = |y: f64| (y / (128 + 2 * crate::content::PAD) as f64) as usize;
+        let (mut located, mut worst) = (0, 0.0f64);
+        for j in 0..h as usize {
+            let mut i = 0;
+            let nx = sampler.columns.len();
+            sampler.row(j, |p| {
+                let cell = sampler.cells[sampler.row[j].cell * (nx - 1) + sampler.col[i].cell];
+                let exact = sampler.exact(i, j);
+                if cell == Cell::Directions && p != exact {
+                    let ((x, y), (ex, ey)) = (p.unwrap(), exact.unwrap());
+                    assert!(
+                        !content.near_a_seam(x, y, SEAM_MARGIN),
+                        "sample ({i}, {j}) located next to a seam"
+                    );
+                    assert_eq!(face(y), face(ey), "sample ({i}, {j}) on another face");
+                    worst = worst.max((x - ex).abs().max((y - ey).abs()));
+                    located += 1;
+                }
+                i += 1;
+            });
+        }
+        assert!(located > 10_000, "{located} samples located");
+        assert!(worst <= BOUND, "{worst} texel off");
+    }
+
+    /// Cube positions near a face's edge, on any face of the stacked atlas, are near a seam;
+    /// the face's inside is not.
+    #[test]
+    fn a_cube_points_out_its_seams() {
+        use crate::content::{Content, PAD};
+        use crate::cubemap::CubeMap;
+
+        let n = 64;
+        let content = Content::cube(&CubeMap::<[u8; 4]>::from_fn(n, 1, |_| [0; 4]));
+        assert!(content.has_seams());
+        let (lo, hi) = (PAD as f64 - 0.5, (n + PAD) as f64 - 0.5);
+        let block = (n + 2 * PAD) as f64;
+        for face in 0..6 {
+            let y0 = face as f64 * block;
+            let mid = (lo + hi) / 2.0;
+            for (x, y, near) in [
+                (mid, y0 + mid, false),
+                (lo + 0.01, y0 + mid, false),
+                (lo + 0.001, y0 + mid, true),
+                (hi - 0.001, y0 + mid, true),
+                (mid, y0 + lo + 0.001, true),
+                (mid, y0 + hi - 0.001, true),
+                (mid, y0 + hi - 0.01, false),
+            ] {
+                assert_eq!(
+                    content.near_a_seam(x, y, 0.002),
+                    near,
+                    "face {face}: ({x}, {y})"
+                );
+            }
+        }
+        let pano = crate::raster::Raster::<[u8; 4]>::new(64, 32);
+        let pano = Content::equirect(&pano, 360.0, 180.0).unwrap();
+        assert!(!pano.has_seams());
     }
 }

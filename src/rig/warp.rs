@@ -6,9 +6,10 @@ use super::{Channel, Rig};
 use crate::content::projective::{Projective, Receiver, map_pixels};
 use crate::normalmap::NormalMap;
 use crate::projection::view::screen_of_pixel;
-use crate::raster::Raster;
+use crate::raster::{Raster, pages};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A channel's warp: V per pixel (the warp map), and the wall point it lands on.
@@ -144,20 +145,21 @@ impl Rig {
     pub fn warp_unless(&self, ch: &Channel, cancel: &AtomicBool) -> Option<ChannelWarp> {
         let (w, h) = (ch.width as usize, ch.height as usize);
         let screen = self.doc.screen.prepare();
-        // Points are written once, below (filling 32 bytes × 8 million pixels beforehand cost
-        // a tenth of a 4K warp); the map starts as zeroed pages.
-        let mut points: Vec<Option<DVec3>> = Vec::with_capacity(w * h);
-        let mut map = vec![[0.0f32; 4]; w * h];
+        // Both outputs are written once, below, into pages mapped beforehand (a 4K warp's
+        // 400 MB; see `raster::pages`).
+        let mut points: Vec<Option<DVec3>> = pages::mapped(w * h, None);
+        let mut map: Vec<[f32; 4]> = pages::mapped(w * h, [0.0; 4]);
         // One pass per row writes both outputs, walking the lens along it (each pixel's
         // unprojection starts from the ones before) and the wall prepared once. The f32 wall
         // raster `--wall` writes is made from the points only when asked for.
         points.spare_capacity_mut()[..w * h]
             .par_chunks_mut(w)
-            .zip(map.par_chunks_mut(w))
+            .zip(map.spare_capacity_mut()[..w * h].par_chunks_mut(w))
             .enumerate()
             .for_each(|(j, (row, vectors))| {
                 if cancel.load(Ordering::Relaxed) {
-                    row.fill(std::mem::MaybeUninit::new(None));
+                    row.fill(MaybeUninit::new(None));
+                    vectors.fill(MaybeUninit::new([0.0; 4]));
                     return;
                 }
                 let mut walk = ch.lens.walk();
@@ -166,14 +168,18 @@ impl Rig {
                     let point =
                         ray.and_then(|r| screen.intersect(ch.position, ch.rotation * r).point());
                     p.write(point);
-                    if let Some(s) = point.and_then(|q| self.sampling_vector(q)) {
-                        *v = [s.x as f32, s.y as f32, s.z as f32, 1.0];
-                    }
+                    v.write(match point.and_then(|q| self.sampling_vector(q)) {
+                        Some(s) => [s.x as f32, s.y as f32, s.z as f32, 1.0],
+                        None => [0.0; 4],
+                    });
                 }
             });
-        // SAFETY: every row above wrote each of its w points (a cancelled row fills its own),
-        // and the rows cover all w × h.
-        unsafe { points.set_len(w * h) };
+        // SAFETY: every row above wrote each of its w points and vectors (a cancelled row
+        // fills its own), and the rows cover all w × h.
+        unsafe {
+            points.set_len(w * h);
+            map.set_len(w * h);
+        }
         if cancel.load(Ordering::Relaxed) {
             return None;
         }
