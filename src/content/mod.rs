@@ -86,6 +86,16 @@ pub trait Locate: Sync {
         let _ = (x, y, margin);
         false
     }
+
+    /// `locate` where the position lies at least `margin` texels from every seam, else `None`
+    /// (as where the content does not cover the direction). Within a few ulps of `locate`'s
+    /// position (a content may trade a division for a multiplication), so only for positions
+    /// that may differ from the exact ones by a stated bound.
+    #[inline]
+    fn locate_clear(&self, d: DVec3, margin: f64) -> Option<(f64, f64)> {
+        self.locate(d)
+            .filter(|&(x, y)| !self.near_a_seam(x, y, margin))
+    }
 }
 
 fn panorama_fov(name: &str, deg: f64, max: f64) -> Result<f64> {
@@ -295,6 +305,27 @@ impl<T: Pixel> Locate for Content<T> {
         let block = (n + 2 * PAD) as f64;
         let y = y - f64::from((y / block) as u32) * block;
         x <= lo || x >= hi || y <= lo || y >= hi
+    }
+
+    #[inline]
+    fn locate_clear(&self, d: DVec3, margin: f64) -> Option<(f64, f64)> {
+        let Kind::Cube { n } = self.kind else {
+            return self
+                .locate(d)
+                .filter(|&(x, y)| !self.near_a_seam(x, y, margin));
+        };
+        // `locate`'s s·n − ½ + PAD with one division for both axes, and the seam test on the
+        // face-local position, without finding the face again from y.
+        let (face, sc, tc, ma) = cubemap::select_raw(self.orientation.apply_inverse(d));
+        let nf = n as f64;
+        let r = 0.5 * nf / ma;
+        let centre = 0.5 * nf - 0.5 + PAD as f64;
+        let (x, y) = (sc * r + centre, tc * r + centre);
+        let (lo, hi) = (PAD as f64 - 0.5 + margin, (n + PAD) as f64 - 0.5 - margin);
+        if x <= lo || x >= hi || y <= lo || y >= hi {
+            return None;
+        }
+        Some((x, y + (face.index() * (n + 2 * PAD)) as f64))
     }
 
     fn bounds(&self) -> Option<[f64; 4]> {

@@ -76,12 +76,17 @@ impl Orientation {
         self.0
     }
 
+    #[inline]
     pub fn apply(&self, d: DVec3) -> DVec3 {
         self.0 * d
     }
 
+    /// Cᵀ·d, without building Cᵀ: each component the dot product with a column of C, summed
+    /// in the order `transpose() * d` sums (so the same bits). Plans call this once a sample.
+    #[inline]
     pub fn apply_inverse(&self, d: DVec3) -> DVec3 {
-        self.0.transpose() * d
+        let c = &self.0;
+        DVec3::new(c.x_axis.dot(d), c.y_axis.dot(d), c.z_axis.dot(d))
     }
 }
 

@@ -213,22 +213,30 @@ impl<'a, L: Locate> Sampler<'a, L> {
             (a.cell..b.cell + 1, a.first..(b.first + 5).min(ny))
         };
         let mut lattice = vec![None; nx * ny];
-        let mut directions = vec![None; nx * ny];
+        // Directions are kept only where cells may interpolate them.
+        let mut directions = vec![None; if content.has_seams() { nx * ny } else { 0 }];
         let node_rows = needed.start * nx..needed.end * nx;
-        lattice[node_rows.clone()]
+        let mut direction_rows: Vec<Option<&mut [Dir]>> =
+            match directions.get_mut(node_rows.clone()) {
+                Some(d) if !d.is_empty() => d.chunks_mut(nx).map(Some).collect(),
+                _ => (0..needed.len()).map(|_| None).collect(),
+            };
+        lattice[node_rows]
             .par_chunks_mut(nx)
-            .zip(directions[node_rows].par_chunks_mut(nx))
+            .zip(direction_rows.par_iter_mut())
             .zip(&rows[needed])
             .for_each(|((positions, directions), &j)| {
-                for ((p, d), &i) in positions.iter_mut().zip(directions).zip(&columns) {
-                    *d = s.direction(i, j);
+                for (c, (p, &i)) in positions.iter_mut().zip(&columns).enumerate() {
+                    let d = s.direction(i, j);
+                    if let Some(directions) = directions {
+                        directions[c] = d;
+                    }
                     *p = d.and_then(|d| s.content.locate(d)).map(DVec2::from);
                 }
             });
+        drop(direction_rows);
         s.lattice = lattice;
-        if content.has_seams() {
-            s.directions = directions;
-        }
+        s.directions = directions;
         s.columns = columns;
         let mut kinds = vec![Cell::Exact; (ny - 1) * (nx - 1)];
         kinds[cells.start * (nx - 1)..cells.end * (nx - 1)]
@@ -370,13 +378,8 @@ impl<'a, L: Locate> Sampler<'a, L> {
             };
             let located = |i: usize| -> Pos {
                 let d = cubic(&directions[first..first + 4], &self.col[i].weights);
-                match self.content.locate(d) {
-                    Some((x, y))
-                        if !self.content.near_a_seam(x, y, SEAM_MARGIN)
-                            && !self.near_a_boundary(x, y) =>
-                    {
-                        Some((x, y))
-                    }
+                match self.content.locate_clear(d, SEAM_MARGIN) {
+                    Some((x, y)) if !self.near_a_boundary(x, y) => Some((x, y)),
                     _ => self.exact(i, j),
                 }
             };
@@ -538,5 +541,67 @@ mod tests {
         let pano = crate::raster::Raster::<[u8; 4]>::new(64, 32);
         let pano = Content::equirect(&pano, 360.0, 180.0).unwrap();
         assert!(!pano.has_seams());
+    }
+
+    /// The direction cells' lookup, `locate_clear`, is `locate` to within a few ulps (it
+    /// multiplies where `locate` divides), and refuses exactly what `near_a_seam` calls near a
+    /// seam, on every face, including directions aimed at a seam to within the margin.
+    #[test]
+    fn a_cube_locates_clear_of_its_seams_as_locate_does() {
+        use crate::content::Content;
+        use crate::cubemap::CubeMap;
+
+        let n = 64;
+        let cube = CubeMap::<[u8; 4]>::from_fn(n, 1, |_| [0; 4]);
+        let turned = crate::projection::Orientation::yaw_pitch_roll(30.0, 20.0, 10.0).unwrap();
+        for content in [
+            Content::cube(&cube),
+            Content::cube(&cube).with_orientation(turned),
+        ] {
+            locates_clear(&content);
+        }
+    }
+
+    fn locates_clear(content: &crate::content::Content<[u8; 4]>) {
+        let margin = 0.01;
+        let mut next = crate::raster::xorshift(7);
+        let mut unit = || (next() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
+        let (mut clear, mut refused) = (0, 0);
+        for k in 0..200_000 {
+            let mut d = DVec3::new(unit(), unit(), unit());
+            if k % 2 == 0 {
+                // Onto the seam between the faces of its two largest components, then a
+                // little off it: a quarter of these fall within the margin.
+                let mut c = [d.x, d.y, d.z];
+                let mut order = [0, 1, 2];
+                order.sort_by(|&a, &b| c[b].abs().total_cmp(&c[a].abs()));
+                c[order[1]] = c[order[0]].abs().copysign(c[order[1]]) * (1.0 - 2e-3 * unit().abs());
+                d = content.orientation().apply(DVec3::from_array(c));
+            }
+            let exact = content.locate(d).expect("a cube covers every direction");
+            match content.locate_clear(d, margin) {
+                Some(p) => {
+                    clear += 1;
+                    assert!(!content.near_a_seam(exact.0, exact.1, margin), "{d}");
+                    let off = (p.0 - exact.0).abs().max((p.1 - exact.1).abs());
+                    assert!(off < 1e-11, "{d}: {p:?} vs {exact:?}");
+                }
+                None => {
+                    refused += 1;
+                    // Ties at the margin itself may go either way by an ulp.
+                    let barely = [margin - 1e-9, margin + 1e-9];
+                    assert!(
+                        barely
+                            .iter()
+                            .any(|&m| content.near_a_seam(exact.0, exact.1, m)),
+                        "{d} refused at {exact:?}"
+                    );
+                }
+            }
+        }
+        assert!(
+            clear > 100_000 && refused > 10_000,
+            "{clear} clear, {refused} refused"
+        );
     }
 }

@@ -1,6 +1,6 @@
 //! `omniwarp bench chart`: grid size against the largest reconstruction error of a tile screen
 //! (SVG) for cylindrical 270°×90°, fisheye 180° and fisheye 220°, with the figures printed (with
-//! `--scene`, `bench chart` is the method chart of `methods.rs` instead).
+//! `--scene`, `bench chart` is the method chart of `methods/` instead).
 
 use super::super::io::print_report;
 use anyhow::{Result, bail};
