@@ -1379,3 +1379,32 @@ fn exit_codes_tell_bad_usage_from_failed_work_and_a_closed_pipe_is_quiet() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// `bench warp` times the frames in threes between copies and reads the bound from the copies
+/// taken among them: as many frames as asked (rounded up to three), one copy per three, and a
+/// share of the bound that is a percentage of a real measurement.
+#[test]
+fn bench_warp_pairs_its_frames_with_the_bandwidth_copies() {
+    let out = Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .args(["bench", "warp", "--size", "64x32", "--face-size", "16"])
+        .args(["--frames", "7", "--threads", "1"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    let number_after = |key: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.contains(key))
+            .unwrap_or_else(|| panic!("{text}"));
+        let rest = &line[line.find(key).unwrap() + key.len()..];
+        let end = rest
+            .find(|c: char| !c.is_ascii_digit() && c != '.')
+            .unwrap_or(rest.len());
+        rest[..end].parse().unwrap_or_else(|_| panic!("{line}"))
+    };
+    assert_eq!(number_after("over "), 9.0, "{text}");
+    assert_eq!(number_after("median of "), 3.0, "{text}");
+    let share = number_after("we reach ");
+    assert!(share > 0.0 && share < 1000.0, "{text}");
+}
