@@ -310,9 +310,8 @@ impl<T: Pixel> Locate for Content<T> {
     #[inline]
     fn locate_clear(&self, d: DVec3, margin: f64) -> Option<(f64, f64)> {
         let Kind::Cube { n } = self.kind else {
-            return self
-                .locate(d)
-                .filter(|&(x, y)| !self.near_a_seam(x, y, margin));
+            // Panoramas have no seams.
+            return self.locate(d);
         };
         // `locate`'s s·n − ½ + PAD with one division for both axes, and the seam test on the
         // face-local position, without finding the face again from y.

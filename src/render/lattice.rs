@@ -213,28 +213,31 @@ impl<'a, L: Locate> Sampler<'a, L> {
             (a.cell..b.cell + 1, a.first..(b.first + 5).min(ny))
         };
         let mut lattice = vec![None; nx * ny];
-        // Directions are kept only where cells may interpolate them.
+        // Directions are kept only where cells may interpolate them, and then located from.
         let mut directions = vec![None; if content.has_seams() { nx * ny } else { 0 }];
         let node_rows = needed.start * nx..needed.end * nx;
-        let mut direction_rows: Vec<Option<&mut [Dir]>> =
-            match directions.get_mut(node_rows.clone()) {
-                Some(d) if !d.is_empty() => d.chunks_mut(nx).map(Some).collect(),
-                _ => (0..needed.len()).map(|_| None).collect(),
-            };
-        lattice[node_rows]
-            .par_chunks_mut(nx)
-            .zip(direction_rows.par_iter_mut())
-            .zip(&rows[needed])
-            .for_each(|((positions, directions), &j)| {
-                for (c, (p, &i)) in positions.iter_mut().zip(&columns).enumerate() {
-                    let d = s.direction(i, j);
-                    if let Some(directions) = directions {
-                        directions[c] = d;
+        if !directions.is_empty() {
+            directions[node_rows.clone()]
+                .par_chunks_mut(nx)
+                .zip(&rows[needed.clone()])
+                .for_each(|(row, &j)| {
+                    for (d, &i) in row.iter_mut().zip(&columns) {
+                        *d = s.direction(i, j);
                     }
+                });
+        }
+        lattice[node_rows.clone()]
+            .par_chunks_mut(nx)
+            .zip(&rows[needed])
+            .enumerate()
+            .for_each(|(r, (row, &j))| {
+                let at = node_rows.start + r * nx;
+                let kept = (!directions.is_empty()).then(|| &directions[at..at + nx]);
+                for (c, (p, &i)) in row.iter_mut().zip(&columns).enumerate() {
+                    let d = kept.map_or_else(|| s.direction(i, j), |kept| kept[c]);
                     *p = d.and_then(|d| s.content.locate(d)).map(DVec2::from);
                 }
             });
-        drop(direction_rows);
         s.lattice = lattice;
         s.directions = directions;
         s.columns = columns;
