@@ -114,6 +114,19 @@ fn run(args: &[&str]) -> (bool, String, String) {
     )
 }
 
+/// The channel a daemon's 201 proposes.
+fn proposed(status: axum::http::StatusCode, body: &[u8]) -> Channel {
+    assert_eq!(
+        status,
+        axum::http::StatusCode::CREATED,
+        "{}",
+        String::from_utf8_lossy(body)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(body).unwrap();
+    let doc: ChannelDoc = serde_json::from_value(doc["proposed"].clone()).unwrap();
+    Channel::from_doc(&doc, "").unwrap()
+}
+
 fn percentile(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     v[((v.len() - 1) as f64 * p).round() as usize]
@@ -623,17 +636,9 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
     let (st, _, _) = call(&s, put("57".into(), "image/png", png(57))).await;
     assert_eq!(st, StatusCode::OK);
     let (st, _, body) = call(&s, decode_req(false)).await;
-    assert_eq!(
-        st,
-        StatusCode::CREATED,
-        "{}",
-        String::from_utf8_lossy(&body)
-    );
-    let proposal = json(&body);
-    let doc: ChannelDoc = serde_json::from_value(proposal["proposed"].clone()).unwrap();
-    let fitted = Channel::from_doc(&doc, "").unwrap();
+    let fitted = proposed(st, &body);
     assert!((fitted.position - projector.position).length() < 0.002);
-    let (st, _, body) = call(&s, get(&format!("/v1/proposals/{}", proposal["id"]))).await;
+    let (st, _, body) = call(&s, get(&format!("/v1/proposals/{}", json(&body)["id"]))).await;
     assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
 
     // The camera's pose from markers instead: the camera document's own pose is wrong.
@@ -648,14 +653,7 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
         body.to_string(),
     );
     let (st, _, body) = call(&s, req).await;
-    assert_eq!(
-        st,
-        StatusCode::CREATED,
-        "{}",
-        String::from_utf8_lossy(&body)
-    );
-    let doc: ChannelDoc = serde_json::from_value(json(&body)["proposed"].clone()).unwrap();
-    let fitted = Channel::from_doc(&doc, "").unwrap();
+    let fitted = proposed(st, &body);
     assert!((fitted.position - projector.position).length() < 0.005);
     let body = serde_json::json!({"camera": lost.doc(), "markers": []});
     let req = write(
@@ -803,6 +801,182 @@ fn a_camera_pose_from_eight_markers_calibrates_the_projector_as_well() {
         with_markers * 1e3
     );
     assert!(with_markers < 0.005, "{with_markers}");
+}
+
+/// The angle between two rotations, degrees.
+fn angle_between(a: glam::DMat3, b: glam::DMat3) -> f64 {
+    let trace: f64 = (a.transpose() * b).to_cols_array().iter().step_by(4).sum();
+    ((trace - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+#[test]
+fn a_camera_posed_from_a_calibrated_projector_calibrates_its_neighbour() {
+    use omniwarp::structured::{PatternSet, camera_pose_from_projector, read_captures};
+    let dir = tempfile::tempdir().unwrap();
+    let rig_path = "calibration/rigs/dome-180-tilt15-5proj.json";
+    let rig = dome();
+    let (front, right) = (
+        rig.channel("front").unwrap().clone(),
+        rig.channel("right").unwrap().clone(),
+    );
+    // One camera, seeing the whole dome, films `front` (calibrated) and then `right` (not):
+    // the README's example camera, `fisheye(1280, 720)`.
+    let camera = Path::new("calibration/examples/camera-dome.json");
+    let truth: ChannelDoc =
+        serde_json::from_str(&std::fs::read_to_string(camera).unwrap()).unwrap();
+    let truth = Channel::from_doc(&truth, "").unwrap();
+    let expected = fisheye(1280, 720);
+    assert!(truth.position == expected.position && truth.lens == expected.lens);
+    assert!(angle_between(truth.rotation, expected.rotation) < 1e-4);
+    let caps = |id: &str, seed: &str| {
+        let out = dir.path().join(id);
+        let (ok, _, err) = run(&[
+            "simulate",
+            "--rig",
+            rig_path,
+            "--channel",
+            id,
+            "--camera",
+            camera.to_str().unwrap(),
+            "--seed",
+            seed,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        out
+    };
+    let (front_caps, right_caps) = (caps("front", "1"), caps("right", "2"));
+    // What is known of the camera: its lens; its pose 37 cm and 30-odd degrees off.
+    let mut guess = truth.clone();
+    guess.position = glam::DVec3::new(0.3, -0.2, 0.1);
+    guess.rotation = glam::DMat3::IDENTITY;
+    let guess_path = dir.path().join("guess.json");
+    std::fs::write(&guess_path, serde_json::to_string(&guess.doc()).unwrap()).unwrap();
+
+    let decoded = decode(
+        &PatternSet::new(front.width, front.height).unwrap(),
+        &read_captures(&front_caps).unwrap(),
+        &DecodeOptions::default(),
+    )
+    .unwrap();
+    let (posed, rms) =
+        camera_pose_from_projector(&decoded, &guess, &front, &rig.doc.screen, 5000).unwrap();
+    let off = (posed.position - truth.position).length();
+    let turned = angle_between(posed.rotation, truth.rotation);
+    eprintln!(
+        "camera posed from `front`: {:.3} mm and {turned:.5}° off, RMS {rms:.3} px",
+        off * 1e3
+    );
+    assert!(off < 0.001, "camera {off} m off");
+    assert!(turned < 0.01, "camera turned {turned}°");
+    // A projector that is not in view poses nothing.
+    let dark = omniwarp::structured::decode::Decoded {
+        samples: vec![None; decoded.samples.len()],
+        ..decoded.clone()
+    };
+    let e = camera_pose_from_projector(&dark, &guess, &front, &rig.doc.screen, 5000).unwrap_err();
+    assert!(e.to_string().contains("only 0 camera pixels"), "{e}");
+
+    let calibrate = |pose_channel: &str| {
+        let out = dir.path().join("right.json");
+        let result = run(&[
+            "calibrate",
+            "--captures",
+            right_caps.to_str().unwrap(),
+            "--camera",
+            guess_path.to_str().unwrap(),
+            "--pose-captures",
+            front_caps.to_str().unwrap(),
+            "--pose-channel",
+            pose_channel,
+            "--rig",
+            rig_path,
+            "--channel",
+            "right",
+            "--model",
+            "LENSMODEL_OPENCV4",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        (result, out)
+    };
+    let ((ok, _, err), out) = calibrate("front");
+    assert!(ok, "{err}");
+    assert!(err.contains("camera pose from `front`"), "{err}");
+    let doc: ChannelDoc = serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+    let fitted = Channel::from_doc(&doc, "").unwrap();
+    let moved = (fitted.position - right.position).length();
+    let turned = angle_between(fitted.rotation, right.rotation);
+    eprintln!(
+        "`right` calibrated through that pose: {:.3} mm and {turned:.5}° off",
+        moved * 1e3
+    );
+    assert!(moved < 0.002, "`right` {moved} m off");
+    assert!(turned < 0.02, "`right` turned {turned}°");
+    let ((ok, _, err), _) = calibrate("right");
+    assert!(
+        !ok && err.contains("--pose-channel: is the channel being calibrated"),
+        "{err}"
+    );
+
+    // The daemon, with both channels' captures uploaded under one view.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        use axum::body::Body;
+        use axum::http::{Request, StatusCode, header};
+        use common::server::{call, json, state_with, write};
+        let text = std::fs::read_to_string(rig_path).unwrap();
+        let s = state_with(None, None, omniwarp::rig::RigDoc::parse(&text).unwrap());
+        let post = |pose_from: &str, markers: bool| {
+            let mut body = serde_json::json!({"camera": guess.doc(), "model": "LENSMODEL_OPENCV4",
+                "pose_from": pose_from});
+            if markers {
+                body["markers"] = serde_json::json!([]);
+            }
+            write(
+                "POST",
+                "/v1/channels/right/captures?view=cam",
+                None,
+                body.to_string(),
+            )
+        };
+        let field = |body: &[u8]| json(body)["field"].as_str().map(String::from);
+        for (id, dir) in [("right", &right_caps), ("front", &front_caps)] {
+            for n in 0..58 {
+                let png = std::fs::read(dir.join(format!("{n:03}.png"))).unwrap();
+                let req = Request::put(format!("/v1/channels/{id}/captures/{n}?view=cam"))
+                    .header(header::CONTENT_TYPE, "image/png")
+                    .body(Body::from(png))
+                    .unwrap();
+                assert_eq!(call(&s, req).await.0, StatusCode::OK);
+            }
+            if id == "right" {
+                // `front`'s captures are not in yet: the pose has nothing to come from.
+                let (st, _, body) = call(&s, post("front", false)).await;
+                assert_eq!(
+                    (st, field(&body).as_deref()),
+                    (StatusCode::BAD_REQUEST, Some("/pose_from"))
+                );
+            }
+        }
+        let (st, _, body) = call(&s, post("front", false)).await;
+        let fitted = proposed(st, &body);
+        assert!((fitted.position - right.position).length() < 0.002);
+        for (pose_from, markers) in [("right", false), ("nowhere", false), ("front", true)] {
+            let (st, _, body) = call(&s, post(pose_from, markers)).await;
+            assert_eq!(
+                (st, field(&body).as_deref()),
+                (StatusCode::BAD_REQUEST, Some("/pose_from")),
+                "{pose_from}: {}",
+                String::from_utf8_lossy(&body)
+            );
+        }
+    });
 }
 
 /// The cylinder example with its wall wrong: radius 2.15 m instead of 2, axis leaning 3°,
@@ -965,5 +1139,127 @@ async fn the_daemon_measures_the_wall_from_two_views() {
     assert_eq!(
         (st, json(&body)["field"].as_str()),
         (StatusCode::BAD_REQUEST, Some("view"))
+    );
+}
+
+/// The corner example: two walls at a right angle, one projector across them, a pinhole
+/// camera beside it.
+fn corner() -> (Rig, Channel) {
+    let rig = Rig::read(Path::new("calibration/rigs/corner-90-1proj.json")).unwrap();
+    let text = std::fs::read_to_string("calibration/examples/camera-corner.json").unwrap();
+    let camera: ChannelDoc = serde_json::from_str(&text).unwrap();
+    (rig, Channel::from_doc(&camera, "").unwrap())
+}
+
+#[test]
+fn xor_codes_decode_the_corner_where_inter_reflection_defeats_the_gray_code() {
+    use omniwarp::structured::Code;
+    let (rig, camera) = corner();
+    let projector = rig.channels[0].clone();
+    // Light bounced between the walls as strong as the direct light, on average; the exposure
+    // lowered so that the brightest pixels, near the corner, do not saturate.
+    let opts = BenchOptions {
+        interreflection: 1.0,
+        exposure: 0.4,
+        ..BenchOptions::default()
+    };
+    let mut figures = Vec::new();
+    for code in [Code::Gray, Code::Xor] {
+        let bench = Bench::new(&rig, &projector, &camera, BenchOptions { code, ..opts }).unwrap();
+        let decoded = decode(
+            bench.patterns(),
+            &capture_all(&bench),
+            &DecodeOptions::default(),
+        )
+        .unwrap();
+        let (mut errors, lit) = decode_errors(&bench, &decoded);
+        let gross = errors.iter().filter(|&&e| e > 1.0).count();
+        let p50 = percentile(&mut errors, 0.5);
+        let decoded_share = errors.len() as f64 / lit as f64;
+        let inconsistent = decoded.rejected.inconsistent as f64 / lit as f64;
+        eprintln!(
+            "{}: {:.1} % of {lit} lit pixels decoded, {:.2} % refused as inconsistent, \
+             median {p50:.4} px, {gross} above 1 px; rejected {:?}",
+            code.name(),
+            100.0 * decoded_share,
+            100.0 * inconsistent,
+            decoded.rejected
+        );
+        assert!(p50 < 0.1, "{}: median {p50}", code.name());
+        figures.push((
+            decoded_share,
+            inconsistent,
+            gross as f64 / errors.len() as f64,
+        ));
+    }
+    let ((gray, gray_bad, gray_gross), (xor, xor_bad, xor_gross)) = (figures[0], figures[1]);
+    assert!(gray_bad > 0.05, "the Gray code held: {gray_bad}");
+    assert!(xor_bad < 0.005, "XOR: {xor_bad} inconsistent");
+    assert!(
+        xor > 0.85 && xor > gray + 0.15,
+        "decoded: Gray {gray}, XOR {xor}"
+    );
+    assert!(xor_gross < 0.001, "XOR: {xor_gross} gross");
+    assert!(
+        xor_gross < gray_gross,
+        "gross: Gray {gray_gross}, XOR {xor_gross}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_daemon_serves_the_xor_code_and_keeps_its_captures_apart() {
+    use axum::body::Body;
+    use axum::http::{Request, StatusCode, header};
+    use common::server::{call, get, json, state_with, write};
+    use omniwarp::structured::{Code, PatternSet};
+    let text = std::fs::read_to_string("calibration/rigs/dome-180-tilt15-5proj.json").unwrap();
+    let s = state_with(None, None, omniwarp::rig::RigDoc::parse(&text).unwrap());
+    let set = PatternSet::new(1920, 1200).unwrap();
+    let frames = set.frames();
+    // Frame 2 is the first (coarsest) x bit, frame 2 + 2·bits the first x phase step.
+    let phase = 2 + 2 * set.bits(omniwarp::structured::Axis::X) as usize;
+    for (n, differ) in [(2, true), (phase, false)] {
+        let mut served = Vec::new();
+        for (query, code) in [("", Code::Gray), ("?code=xor", Code::Xor)] {
+            let (st, _, png) =
+                call(&s, get(&format!("/v1/channels/front/pattern/{n}{query}"))).await;
+            assert_eq!(st, StatusCode::OK);
+            let grey = Grey::decode(&png, "body").unwrap();
+            assert_eq!(
+                grey,
+                set.with_code(code).image(frames[n]),
+                "frame {n}{query}"
+            );
+            served.push(grey);
+        }
+        assert_eq!(served[0] != served[1], differ, "frame {n}");
+    }
+    let (st, _, body) = call(&s, get("/v1/channels/front/pattern/2?code=grey")).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("code"))
+    );
+    // A capture under one code is not one under the other.
+    let png = set.with_code(Code::Xor).image(frames[2]).png().unwrap();
+    let req = Request::put("/v1/channels/front/captures/2?code=xor")
+        .header(header::CONTENT_TYPE, "image/png")
+        .body(Body::from(png))
+        .unwrap();
+    assert_eq!(call(&s, req).await.0, StatusCode::OK);
+    for (query, received) in [
+        ("?code=xor", serde_json::json!([2])),
+        ("", serde_json::json!([])),
+    ] {
+        let (_, _, body) = call(&s, get(&format!("/v1/channels/front/captures{query}"))).await;
+        assert_eq!(json(&body)["received"], received, "{query}");
+    }
+    let camera = fisheye(640, 360).doc();
+    let body = serde_json::json!({"views": [{"camera": camera}, {"camera": camera, "view": "b"}],
+        "code": "grey"});
+    let req = write("POST", "/v1/channels/front/wall", None, body.to_string());
+    let (st, _, body) = call(&s, req).await;
+    assert_eq!(
+        (st, json(&body)["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/code"))
     );
 }

@@ -208,6 +208,11 @@ pub fn parse_vec3(s: &str) -> Result<DVec3, String> {
     }
 }
 
+/// A structured-light code by name: `gray` or `xor`.
+pub fn parse_code(s: &str) -> Result<omniwarp::structured::Code, String> {
+    s.parse().map_err(|e: omniwarp::Error| e.reason())
+}
+
 pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let parse = |v: &str| {
         v.trim()
@@ -299,12 +304,20 @@ pub struct BenchConditions {
     /// One-bounce inter-reflection under white, a fraction of the direct light.
     #[arg(long, default_value_t = 0.0)]
     pub interreflection: f64,
+    /// The share of the camera's full scale that white plus ambient reaches at the image
+    /// centre: lower it where bounced light would saturate the camera.
+    #[arg(long, default_value_t = 0.8)]
+    pub exposure: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// The sequence's phase period, projector pixels (even, 8–256): longer for a camera too
     /// defocused to see 16 px stripes. Give calibrate and measure the same.
     #[arg(long, default_value_t = 16)]
     pub period: u32,
+    /// How the sequence shows its Gray bits: gray, or xor (each coarse bit XOR the finest, for
+    /// walls that fold onto themselves). Give calibrate and measure the same.
+    #[arg(long, default_value = "gray", value_parser = parse_code)]
+    pub code: omniwarp::structured::Code,
 }
 
 impl BenchConditions {
@@ -344,8 +357,10 @@ impl BenchConditions {
             ambient: self.ambient,
             vignetting: self.vignetting,
             interreflection: self.interreflection,
+            exposure: self.exposure,
             seed: self.seed,
             period: self.period,
+            code: self.code,
             ..Default::default()
         };
         opts.validate().map_err(|e| match e {

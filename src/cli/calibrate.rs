@@ -34,6 +34,15 @@ pub struct CalibrateArgs {
     /// and the camera pixels where they appear; at least 4.
     #[arg(long, requires = "captures")]
     markers: Option<PathBuf>,
+    /// Instead of --markers: captures of the sequence shown by another projector, one already
+    /// calibrated in --rig (--pose-channel), filmed by the camera from where it now stands. The
+    /// camera's pose is solved from them, its lens kept: what that projector decodes to at a
+    /// camera pixel, followed to the wall, is a marker there.
+    #[arg(long, requires_all = ["captures", "pose_channel"], conflicts_with = "markers")]
+    pose_captures: Option<PathBuf>,
+    /// The channel of --rig that --pose-captures show.
+    #[arg(long, requires = "pose_captures")]
+    pose_channel: Option<String>,
     /// The rig whose wall the camera looks at.
     #[arg(long)]
     rig: Option<PathBuf>,
@@ -50,6 +59,9 @@ pub struct CalibrateArgs {
     /// --captures; `simulate --period`).
     #[arg(long, default_value_t = 16)]
     period: u32,
+    /// The code the captures' patterns were shown with: gray or xor (`simulate --code`).
+    #[arg(long, default_value = "gray", value_parser = super::args::parse_code)]
+    code: omniwarp::structured::Code,
     /// Decoded camera pixels used as correspondences, at most (with --captures).
     #[arg(long, default_value_t = 5000)]
     points: usize,
@@ -178,6 +190,9 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         );
         camera = posed;
     }
+    if let Some(dir) = &a.pose_captures {
+        camera = pose_from_projector(a, &rig, dir, camera)?;
+    }
     let choice = match a.model.as_deref().unwrap_or("auto") {
         "auto" => ModelChoice::Auto,
         m => ModelChoice::Fixed(
@@ -191,7 +206,8 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     let resolution = [projector.width, projector.height];
     let set = PatternSet::new(resolution[0], resolution[1])?
         .with_period(a.period)
-        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?;
+        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?
+        .with_code(a.code);
     let opts = DecodeOptions::default();
     if let Some(out) = &a.check {
         let decoded = decode(&set, &frames, &opts)
@@ -266,4 +282,53 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         resolution,
         a.out.as_ref().expect("clap requires it"),
     )
+}
+
+/// `--pose-captures`: the camera posed from another projector's captures.
+fn pose_from_projector(
+    a: &CalibrateArgs,
+    rig: &omniwarp::rig::Rig,
+    dir: &std::path::Path,
+    camera: omniwarp::rig::Channel,
+) -> Result<omniwarp::rig::Channel> {
+    use omniwarp::structured::decode::{DecodeOptions, decode};
+    use omniwarp::structured::{PatternSet, camera_pose_from_projector, read_captures};
+    let anchor_id = a.pose_channel.as_deref().expect("clap requires it");
+    if Some(anchor_id) == a.channel.as_deref() {
+        anyhow::bail!(
+            "--pose-channel: is the channel being calibrated; the camera is posed from another \
+             one, already calibrated"
+        );
+    }
+    let anchor = rig
+        .channel(anchor_id)
+        .map_err(|e| anyhow::anyhow!("--pose-channel: {}", named(e)))?;
+    let frames =
+        read_captures(dir).map_err(|e| anyhow::anyhow!("--pose-captures: {}", named(e)))?;
+    if let Some(f) = frames.first()
+        && (f.width, f.height) != (camera.width, camera.height)
+    {
+        anyhow::bail!(
+            "--pose-captures: are {}×{}, the camera {}×{}",
+            f.width,
+            f.height,
+            camera.width,
+            camera.height
+        );
+    }
+    let set = PatternSet::new(anchor.width, anchor.height)?
+        .with_period(a.period)
+        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?
+        .with_code(a.code);
+    let decoded = decode(&set, &frames, &DecodeOptions::default())
+        .map_err(|e| anyhow::anyhow!("--pose-captures: {}", named(e)))?;
+    let (posed, rms) =
+        camera_pose_from_projector(&decoded, &camera, anchor, &rig.doc.screen, a.points)
+            .map_err(|e| anyhow::anyhow!("--pose-captures: {}", named(e)))?;
+    eprintln!(
+        "camera pose from `{anchor_id}` ({} pixels decoded): position {:?}, RMS {rms:.3} px",
+        decoded.valid(),
+        posed.position.to_array()
+    );
+    Ok(posed)
 }

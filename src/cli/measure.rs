@@ -36,6 +36,9 @@ pub struct MeasureArgs {
     /// The phase period the patterns were shown with, projector pixels.
     #[arg(long, default_value_t = 16)]
     period: u32,
+    /// The code the patterns were shown with: gray or xor.
+    #[arg(long, default_value = "gray", value_parser = super::args::parse_code)]
+    code: omniwarp::structured::Code,
     /// Write the rig with the fitted wall here (JSON).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -49,7 +52,8 @@ pub fn run(a: MeasureArgs) -> Result<()> {
     let projector = channel(&rig, &a.channel)?;
     let set = PatternSet::new(projector.width, projector.height)?
         .with_period(a.period)
-        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?;
+        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?
+        .with_code(a.code);
     let mut views = Vec::new();
     for (dir, camera) in a.captures.iter().zip(&a.camera) {
         let camera = read_camera(camera)?;

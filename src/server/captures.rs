@@ -29,27 +29,24 @@ struct Reading {
     set: PatternSet,
 }
 
-/// Channel `id` (404 if the rig has none) and its sequence with phase period `period`
-/// (default 16), an error naming `field` for a period that is not one.
-fn read_channel(
-    s: &AppState,
-    id: &str,
-    period: Option<u32>,
-    field: &str,
-) -> Result<Reading, ApiError> {
+/// How a request names the sequence shown: its phase period (default 16) and its code
+/// (default `gray`), and where an error on either points: `at` is "" for query parameters,
+/// "/" for fields of the body.
+#[derive(Clone, Copy)]
+pub(super) struct Named<'a> {
+    pub period: Option<u32>,
+    pub code: Option<&'a str>,
+    pub at: &'a str,
+}
+
+/// Channel `id` (404 if the rig has none) and the sequence `named`.
+fn read_channel(s: &AppState, id: &str, named: Named) -> Result<Reading, ApiError> {
     let (rig, revision) = s.store.snapshot();
     let channel = rig
         .channel(id)
         .map_err(|_| ApiError::NotFound(format!("no channel `{id}`")))?
         .clone();
-    let set = PatternSet::new(channel.width, channel.height)?;
-    let set = match period {
-        None => set,
-        Some(p) => set.with_period(p).map_err(|e| ApiError::Invalid {
-            field: field.into(),
-            reason: e.reason(),
-        })?,
-    };
+    let set = sequence_of(&channel, named)?;
     Ok(Reading {
         rig,
         revision,
@@ -58,14 +55,45 @@ fn read_channel(
     })
 }
 
-/// The channel's pattern sequence, as [`read_channel`] reads it.
-pub(super) fn sequence(
-    s: &AppState,
-    id: &str,
-    period: Option<u32>,
+/// The sequence `named` on `channel`.
+fn sequence_of(channel: &Channel, named: Named) -> Result<PatternSet, ApiError> {
+    let invalid = |what: &str, e: crate::Error| ApiError::Invalid {
+        field: format!("{}{what}", named.at),
+        reason: e.reason(),
+    };
+    let mut set = PatternSet::new(channel.width, channel.height)?;
+    if let Some(p) = named.period {
+        set = set.with_period(p).map_err(|e| invalid("period", e))?;
+    }
+    if let Some(c) = named.code {
+        set = set.with_code(c.parse().map_err(|e| invalid("code", e))?);
+    }
+    Ok(set)
+}
+
+/// A 400 naming the camera's resolution (`field`) unless `frames` (`whose` captures) have
+/// the camera's size.
+fn camera_sized(
+    frames: &[Arc<Grey>],
+    camera: &Channel,
     field: &str,
-) -> Result<PatternSet, ApiError> {
-    Ok(read_channel(s, id, period, field)?.set)
+    whose: &str,
+) -> Result<(), ApiError> {
+    match frames.first() {
+        Some(f) if (f.width, f.height) != (camera.width, camera.height) => Err(ApiError::Invalid {
+            field: field.into(),
+            reason: format!(
+                "is {}×{}, {whose} {}×{}",
+                camera.width, camera.height, f.width, f.height
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The channel's pattern sequence, as [`read_channel`] reads it.
+pub(super) fn sequence(s: &AppState, id: &str, named: Named) -> Result<PatternSet, ApiError> {
+    Ok(read_channel(s, id, named)?.set)
 }
 
 /// Which camera's captures a request means: several cameras can film the same channel (to
@@ -79,26 +107,41 @@ pub struct ViewQuery {
     /// The sequence's phase period, as the patterns were shown with it.
     #[serde(default)]
     period: Option<u32>,
+    /// The sequence's code (`gray` or `xor`), as the patterns were shown with it.
+    #[serde(default)]
+    code: Option<String>,
+}
+
+impl ViewQuery {
+    fn named(&self) -> Named<'_> {
+        Named {
+            period: self.period,
+            code: self.code.as_deref(),
+            at: "",
+        }
+    }
 }
 
 /// The capture store's key for channel `id`'s captures of `view` in sequence `set`; `field`
-/// names the view in an error. Sequences of other periods have other frames, so each is kept
-/// apart.
+/// names the view in an error. Sequences of other periods or codes have other frames, so each
+/// is kept apart.
 fn slot(id: &str, view: Option<&str>, set: &PatternSet, field: &str) -> Result<String, ApiError> {
-    let id = if set.period == crate::structured::PERIOD {
-        id.to_string()
-    } else {
-        format!("{id}\u{1f}{}", set.period)
+    // The unit separator cannot appear in an id or a view name, so keys never collide.
+    let key = |view: &str| {
+        format!(
+            "{id}\u{1f}{}\u{1f}{}\u{1f}{view}",
+            set.period,
+            set.code.name()
+        )
     };
     match view {
-        None => Ok(id),
+        None => Ok(key("")),
         Some(v)
             if (1..=32).contains(&v.len())
                 && v.bytes()
                     .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_') =>
         {
-            // The unit separator cannot appear in a view name, so keys never collide.
-            Ok(format!("{id}\u{1f}{v}"))
+            Ok(key(v))
         }
         Some(v) => Err(ApiError::Invalid {
             field: field.into(),
@@ -118,7 +161,7 @@ pub async fn get_captures(
     Path(id): Path<String>,
     Query(q): Query<ViewQuery>,
 ) -> Result<Response, ApiError> {
-    let set = sequence(&s, &id, q.period, "period")?;
+    let set = sequence(&s, &id, q.named())?;
     let key = slot(&id, q.view.as_deref(), &set, "view")?;
     Ok(Json(status(&s, &key, &set)).into_response())
 }
@@ -128,7 +171,7 @@ pub async fn delete_captures(
     Path(id): Path<String>,
     Query(q): Query<ViewQuery>,
 ) -> Result<Response, ApiError> {
-    let set = sequence(&s, &id, q.period, "period")?;
+    let set = sequence(&s, &id, q.named())?;
     let dropped = s
         .captures
         .clear(&slot(&id, q.view.as_deref(), &set, "view")?);
@@ -141,7 +184,7 @@ pub async fn put_capture(
     Query(q): Query<ViewQuery>,
     body: Bytes,
 ) -> Result<Response, ApiError> {
-    let set = sequence(&s, &id, q.period, "period")?;
+    let set = sequence(&s, &id, q.named())?;
     let key = slot(&id, q.view.as_deref(), &set, "view")?;
     let n: usize = n.parse().map_err(|_| ApiError::Invalid {
         field: "n".into(),
@@ -168,6 +211,10 @@ struct DecodeBody {
     /// pose is solved from them (its lens kept) instead of taken from `camera`.
     #[serde(default)]
     markers: Option<Vec<crate::calibration::Correspondence>>,
+    /// Instead of `markers`: another channel, already calibrated, whose captures (under the
+    /// same view) the camera took from where it stands; the camera's pose is solved from them.
+    #[serde(default)]
+    pose_from: Option<String>,
     /// Compare with the channel's current calibration instead of proposing one.
     #[serde(default)]
     check: bool,
@@ -193,9 +240,15 @@ pub async fn post_captures(
         revision: rig_revision,
         channel: projector,
         set,
-    } = read_channel(&s, &id, q.period, "period")?;
+    } = read_channel(&s, &id, q.named())?;
     let key = slot(&id, q.view.as_deref(), &set, "view")?;
     let mut camera = Channel::from_doc(&b.camera, "/camera")?;
+    if b.markers.is_some() && b.pose_from.is_some() {
+        return Err(ApiError::Invalid {
+            field: "/pose_from".into(),
+            reason: "the camera is posed from markers or from another channel, not both".into(),
+        });
+    }
     if let Some(markers) = &b.markers {
         crate::limits::at_most("/markers", markers.len(), crate::limits::CALIBRATION_POINTS)?;
         let (c, markers) = (camera.clone(), markers.clone());
@@ -213,6 +266,9 @@ pub async fn post_captures(
         .await?;
     }
     crate::limits::at_most("/points", b.points, crate::limits::CALIBRATION_POINTS)?;
+    if let Some(anchor) = &b.pose_from {
+        camera = pose_from(&s, &rig, anchor, &id, &q, camera, b.points).await?;
+    }
     let choice = match b.model.as_deref().unwrap_or("auto") {
         "auto" => ModelChoice::Auto,
         m => ModelChoice::Fixed(m.parse().map_err(|e: crate::Error| ApiError::Invalid {
@@ -221,17 +277,7 @@ pub async fn post_captures(
         })?),
     };
     let frames = complete(&s, &key, &set, "captures")?;
-    if let Some(f) = frames.first()
-        && (f.width, f.height) != (camera.width, camera.height)
-    {
-        return Err(ApiError::Invalid {
-            field: "/camera/resolution".into(),
-            reason: format!(
-                "is {}×{}, the captures {}×{}",
-                camera.width, camera.height, f.width, f.height
-            ),
-        });
-    }
+    camera_sized(&frames, &camera, "/camera/resolution", "the captures")?;
     let opts = DecodeOptions::default();
     let resolution = [projector.width, projector.height];
     if b.refit && !b.check {
@@ -285,6 +331,59 @@ pub async fn post_captures(
     offer(&s, &id, rig_revision, resolution, &found.calibration).await
 }
 
+/// The camera posed from the captures of channel `anchor` (already calibrated, not `id`)
+/// under the request's view.
+async fn pose_from(
+    s: &Arc<AppState>,
+    rig: &crate::rig::Rig,
+    anchor: &str,
+    id: &str,
+    q: &ViewQuery,
+    camera: Channel,
+    points: usize,
+) -> Result<Channel, ApiError> {
+    let invalid = |reason: String| ApiError::Invalid {
+        field: "/pose_from".into(),
+        reason,
+    };
+    if anchor == id {
+        return Err(invalid(
+            "is the channel being calibrated; the camera is posed from another one, already \
+             calibrated"
+                .into(),
+        ));
+    }
+    let projector = rig
+        .channel(anchor)
+        .map_err(|_| invalid(format!("the rig has no channel `{anchor}`")))?
+        .clone();
+    let set = sequence_of(&projector, q.named())?;
+    let key = slot(anchor, q.view.as_deref(), &set, "view")?;
+    let frames = complete(s, &key, &set, "/pose_from")?;
+    camera_sized(
+        &frames,
+        &camera,
+        "/camera/resolution",
+        &format!("`{anchor}`'s captures"),
+    )?;
+    let screen = rig.doc.screen.clone();
+    run_job(s, move |_| {
+        let decoded = decode(&set, &frames, &DecodeOptions::default())?;
+        crate::structured::camera_pose_from_projector(
+            &decoded, &camera, &projector, &screen, points,
+        )
+        .map(|(posed, _)| posed)
+        .map_err(|e| match e {
+            crate::Error::Invalid { reason, .. } => ApiError::Invalid {
+                field: "/pose_from".into(),
+                reason,
+            },
+            other => other.into(),
+        })
+    })
+    .await
+}
+
 /// Every frame of the captures under `key`, or an error naming `field` with those missing.
 fn complete(
     s: &AppState,
@@ -319,6 +418,9 @@ struct WallBody {
     /// The phase period the patterns were shown with.
     #[serde(default)]
     period: Option<u32>,
+    /// The code the patterns were shown with (`gray` or `xor`).
+    #[serde(default)]
+    code: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -369,23 +471,26 @@ pub async fn post_wall(
         revision: rig_revision,
         set,
         ..
-    } = read_channel(&s, &id, b.period, "/period")?;
+    } = read_channel(
+        &s,
+        &id,
+        Named {
+            period: b.period,
+            code: b.code.as_deref(),
+            at: "/",
+        },
+    )?;
     let mut views = Vec::new();
     for (i, v) in b.views.iter().enumerate() {
         let camera = Channel::from_doc(&v.camera, &format!("/views/{i}/camera"))?;
         let key = slot(&id, v.view.as_deref(), &set, &format!("/views/{i}/view"))?;
         let frames = complete(&s, &key, &set, &format!("/views/{i}/view"))?;
-        if let Some(f) = frames.first()
-            && (f.width, f.height) != (camera.width, camera.height)
-        {
-            return Err(ApiError::Invalid {
-                field: format!("/views/{i}/camera/resolution"),
-                reason: format!(
-                    "is {}×{}, the captures {}×{}",
-                    camera.width, camera.height, f.width, f.height
-                ),
-            });
-        }
+        camera_sized(
+            &frames,
+            &camera,
+            &format!("/views/{i}/camera/resolution"),
+            "the captures",
+        )?;
         views.push((camera, frames));
     }
     let screen = rig.doc.screen.clone();

@@ -118,6 +118,9 @@ pub struct PatternQuery {
     /// The sequence's phase period, projector pixels (default 16).
     #[serde(default)]
     period: Option<u32>,
+    /// The sequence's code: `gray` (default) or `xor`.
+    #[serde(default)]
+    code: Option<String>,
 }
 
 pub async fn pattern(
@@ -125,15 +128,23 @@ pub async fn pattern(
     Path((id, n)): Path<(String, String)>,
     Query(q): Query<PatternQuery>,
 ) -> Result<Response, ApiError> {
-    let set = super::captures::sequence(&s, &id, q.period, "period")?;
+    let named = super::captures::Named {
+        period: q.period,
+        code: q.code.as_deref(),
+        at: "",
+    };
+    let set = super::captures::sequence(&s, &id, named)?;
     let n: usize = n.parse().map_err(|_| ApiError::Invalid {
         field: "n".into(),
         reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
     })?;
     let frame = set.frame(n, "n")?;
     let etag = format!(
-        "\"pattern-{}x{}-p{}-{n}\"",
-        set.width, set.height, set.period
+        "\"pattern-{}x{}-p{}-{}-{n}\"",
+        set.width,
+        set.height,
+        set.period,
+        set.code.name()
     );
     let png = run_job(&s, move |_| Ok(set.image(frame).png()?)).await?;
     outputs::file(&s, png, "image/png", &etag)

@@ -62,6 +62,8 @@ pub struct BenchOptions {
     pub seed: u64,
     /// The sequence's phase period, projector pixels ([`PatternSet::with_period`]).
     pub period: u32,
+    /// How the sequence shows its Gray bits.
+    pub code: super::Code,
 }
 
 impl Default for BenchOptions {
@@ -78,6 +80,7 @@ impl Default for BenchOptions {
             exposure: 0.8,
             seed: 1,
             period: super::PERIOD,
+            code: super::Code::Gray,
         }
     }
 }
@@ -161,7 +164,9 @@ impl Bench {
             camera.width as usize * camera.height as usize,
             super::CAPTURE_PIXELS,
         )?;
-        let set = PatternSet::new(projector.width, projector.height)?.with_period(opts.period)?;
+        let set = PatternSet::new(projector.width, projector.height)?
+            .with_period(opts.period)?
+            .with_code(opts.code);
         let screen = &rig.doc.screen;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let s = opts.supersample as usize;

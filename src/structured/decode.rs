@@ -1,7 +1,7 @@
 //! Decoding captures of the [`PatternSet`] sequence: per camera pixel, the projector pixel
 //! that lights it, to a fraction of a pixel, with a confidence.
 
-use super::{Axis, Grey, PatternSet, STEPS, step_angle};
+use super::{Axis, Code, Grey, PatternSet, STEPS, step_angle};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
 use std::borrow::Borrow;
@@ -52,6 +52,8 @@ pub struct Rejected {
     /// Phase amplitude below `min_modulation`.
     pub flat: usize,
     /// Gray code and phase disagree by more than 3/8 of a period: inter-reflection or motion.
+    /// With the XOR code, also a pixel on the finest stripe's edge with no neighbour read clear
+    /// of it.
     pub inconsistent: usize,
     /// Outside the projector's image.
     pub outside: usize,
@@ -123,40 +125,46 @@ pub fn decode<F: Borrow<Grey> + Sync>(
     // Where each axis's Gray pairs and phase steps start in the sequence.
     let x_at = 2;
     let y_at = x_at + 2 * bx + n;
-    let results: Vec<(Option<Sample>, Option<Fail>)> = (0..(w as usize) * (h as usize))
+    // Per pixel: the sample or why there is none, and per axis whether an XOR code's coarse
+    // bits could not be read there (see `unwrap_from_neighbours`).
+    type Outcome = (Option<Sample>, Option<Fail>, [bool; 2]);
+    let results: Vec<Outcome> = (0..(w as usize) * (h as usize))
         .into_par_iter()
         .with_min_len(4096)
         .map(|i| {
             let v = |k: usize| f64::from(frames[k].data[i]);
             let contrast = v(0) - v(1);
             if contrast < opts.min_contrast {
-                return (None, Some(Fail::Dark));
+                return (None, Some(Fail::Dark), [false; 2]);
             }
-            let ax = match axis(v, x_at, bx, set.width, set.period, opts) {
+            let ax = match axis(v, x_at, bx, set.width, set, opts) {
                 Ok(a) => a,
-                Err(f) => return (None, Some(f)),
+                Err(f) => return (None, Some(f), [false; 2]),
             };
-            let ay = match axis(v, y_at, by, set.height, set.period, opts) {
+            let ay = match axis(v, y_at, by, set.height, set, opts) {
                 Ok(a) => a,
-                Err(f) => return (None, Some(f)),
+                Err(f) => return (None, Some(f), [false; 2]),
             };
-            let sigma = ax.1.max(ay.1);
+            let sigma = ax.sigma.max(ay.sigma);
             if sigma > opts.max_sigma * f64::from(set.period) / f64::from(super::PERIOD) {
-                return (None, Some(Fail::Noisy));
+                return (None, Some(Fail::Noisy), [false; 2]);
             }
             (
                 Some(Sample {
-                    q: [ax.0, ay.0],
+                    q: [ax.x, ay.x],
                     sigma,
                 }),
                 None,
+                [ax.ambiguous, ay.ambiguous],
             )
         })
         .collect();
     let mut rejected = Rejected::default();
     let mut samples = Vec::with_capacity(results.len());
-    for (s, f) in results {
+    let mut ambiguous = Vec::with_capacity(results.len());
+    for (s, f, a) in results {
         samples.push(s);
+        ambiguous.push(a);
         match f {
             Some(Fail::Dark) => rejected.dark += 1,
             Some(Fail::Flat) => rejected.flat += 1,
@@ -166,6 +174,7 @@ pub fn decode<F: Borrow<Grey> + Sync>(
             None => {}
         }
     }
+    rejected.inconsistent += unwrap_from_neighbours(&mut samples, &ambiguous, w as usize, set);
     let edge = erode(
         &mut samples,
         w as usize,
@@ -179,6 +188,65 @@ pub fn decode<F: Borrow<Grey> + Sync>(
         samples,
         rejected,
     })
+}
+
+/// Where an XOR code's finest stripe changes (mid-period), every frame of the axis changes
+/// with it, so a camera pixel straddling that edge reads all its bits near the threshold and
+/// noise can flip any of them: the decoded half period can land anywhere, and the phase, which
+/// only checks the position within a period, cannot tell. The two half periods on either
+/// side of that edge share all their coarse bits, though, so a neighbour read clear of the edge
+/// names the period: such a pixel keeps its phase and takes the period nearest the closest
+/// clear neighbour's position (within 3 pixels). Without one, or when that lands off the
+/// projector's image, it is dropped and counted as inconsistent; returns how many were.
+fn unwrap_from_neighbours(
+    samples: &mut [Option<Sample>],
+    ambiguous: &[[bool; 2]],
+    w: usize,
+    set: &PatternSet,
+) -> usize {
+    const REACH: usize = 3;
+    let h = samples.len() / w.max(1);
+    let p = f64::from(set.period);
+    let sides = [set.width, set.height];
+    let mut fixed = Vec::new();
+    for (i, a) in ambiguous.iter().enumerate() {
+        let Some(s) = samples[i] else { continue };
+        if !a[0] && !a[1] {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let mut q = s.q;
+        let mut ok = true;
+        for axis in (0..2).filter(|&k| a[k]) {
+            let mut best: Option<(usize, f64)> = None;
+            for ny in y.saturating_sub(REACH)..(y + REACH + 1).min(h) {
+                for nx in x.saturating_sub(REACH)..(x + REACH + 1).min(w) {
+                    let j = ny * w + nx;
+                    let (Some(n), false) = (samples[j], ambiguous[j][axis]) else {
+                        continue;
+                    };
+                    let d = nx.abs_diff(x).pow(2) + ny.abs_diff(y).pow(2);
+                    if best.is_none_or(|b| d < b.0) {
+                        best = Some((d, n.q[axis]));
+                    }
+                }
+            }
+            match best {
+                Some((_, near)) => {
+                    q[axis] += p * ((near - q[axis]) / p).round();
+                    ok &= inside(q[axis], sides[axis]);
+                }
+                None => ok = false,
+            }
+        }
+        fixed.push((i, ok.then_some(Sample { q, ..s })));
+    }
+    let mut dropped = 0;
+    for (i, s) in fixed {
+        dropped += usize::from(s.is_none());
+        samples[i] = s;
+    }
+    dropped
 }
 
 /// Drops decoded pixels within `radius` pixels (a square) of an undecoded one; returns how
@@ -229,19 +297,47 @@ fn erode(samples: &mut [Option<Sample>], w: usize, h: usize, radius: u32) -> usi
     dropped
 }
 
-/// One axis of one pixel: the position and its predicted deviation. `v(k)` reads frame k;
-/// the axis's Gray pairs start at `at`, its phase steps follow them.
+/// Whether position `x` lies on a projector axis of `side` pixels.
+fn inside(x: f64, side: u32) -> bool {
+    (-0.5..=f64::from(side) - 0.5).contains(&x)
+}
+
+/// One axis of one pixel, decoded.
+struct AxisRead {
+    /// The position, projector pixels.
+    x: f64,
+    /// Its predicted deviation.
+    sigma: f64,
+    /// An XOR code's finest bit was read too close to its threshold for the coarse bits to be
+    /// trusted (see `unwrap_from_neighbours`).
+    ambiguous: bool,
+}
+
+/// An XOR code's finest pair whose difference is under this share of white − black is read
+/// too near its edge to trust the coarse bits.
+const XOR_CLEAR: f64 = 0.25;
+
+/// One axis of one pixel. `v(k)` reads frame k; the axis's Gray pairs start at `at`, its
+/// phase steps follow them.
 fn axis(
     v: impl Fn(usize) -> f64,
     at: usize,
     bits: usize,
     side: u32,
-    period: u32,
+    set: &PatternSet,
     opts: &DecodeOptions,
-) -> std::result::Result<(f64, f64), Fail> {
+) -> std::result::Result<AxisRead, Fail> {
+    let period = set.period;
+    let last = at + 2 * (bits - 1);
+    let ambiguous =
+        set.code == Code::Xor && (v(last) - v(last + 1)).abs() < XOR_CLEAR * (v(0) - v(1));
     let mut gray = 0u32;
     for b in 0..bits {
         gray = (gray << 1) | u32::from(v(at + 2 * b) > v(at + 2 * b + 1));
+    }
+    if set.code == Code::Xor && gray & 1 == 1 {
+        // Every bit but the finest was shown XOR the finest.
+        gray ^= ((1u32 << bits) - 1) & !1;
     }
     // Gray → binary: each bit is the XOR of all higher Gray bits.
     let mut half = gray;
@@ -271,11 +367,14 @@ fn axis(
     let wrapped = phi / TAU * p;
     let centre = (f64::from(half) + 0.5) * p / 2.0;
     let x = wrapped + p * ((centre - wrapped) / p).round();
-    if (x - centre).abs() > 3.0 * p / 8.0 {
-        return Err(Fail::Inconsistent);
-    }
-    if !(-0.5..=f64::from(side) - 0.5).contains(&x) {
-        return Err(Fail::Outside);
+    // An ambiguous pixel's half period is chosen again from its neighbours, and checked then.
+    if !ambiguous {
+        if (x - centre).abs() > 3.0 * p / 8.0 {
+            return Err(Fail::Inconsistent);
+        }
+        if !inside(x, side) {
+            return Err(Fail::Outside);
+        }
     }
     // The fit's residuals estimate the noise (N − 3 degrees of freedom: mean, amplitude,
     // phase); an 8-bit capture's rounding sets a floor.
@@ -286,5 +385,9 @@ fn axis(
     }
     let noise = (rss / (nf - 3.0)).sqrt().max(1.0 / 12f64.sqrt());
     let sigma = (2.0 / nf).sqrt() * noise / modulation * p / TAU;
-    Ok((x, sigma))
+    Ok(AxisRead {
+        x,
+        sigma,
+        ambiguous,
+    })
 }

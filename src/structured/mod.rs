@@ -11,9 +11,20 @@
 //!   another, [`PatternSet::with_period`], for a camera too defocused to see 16 px), in
 //!   [`STEPS`] steps: the phase gives a sub-pixel position within the period. With 12 steps,
 //!   harmonics 2–10 of the sinusoid cancel in the phase, so the projector's and the camera's
-//!   gamma (which bend the sinusoid) do not bias it. Inter-reflection spreads light over
-//!   distances much longer than 16 px, where a sinusoid and both Gray stripes average alike,
-//!   so it adds an offset and leaves the phase and the bits alone.
+//!   gamma (which bend the sinusoid) do not bias it.
+//!
+//! Inter-reflection spreads light over distances much longer than 16 px, where a sinusoid and
+//! the finest stripes average alike: it adds the same offset to every step and to both frames
+//! of a pair, and leaves the phase and the fine bits alone. The coarse Gray bits are another
+//! matter: a bit and its inverse light different halves of the wall, so the light bounced onto
+//! a point differs between them, and where a wall folds onto itself (a room's corner) the half
+//! facing the point can bounce more light onto it than the projector sends it directly. The
+//! bit then reads wrong; the phase disagrees with it and the pixel is refused as inconsistent
+//! (on a sphere the bounce is the same at every point, so a dome is safe). [`Code::Xor`]
+//! (Gupta et al., "A practical approach to 3D scanning in the presence of interreflections,
+//! subsurface scattering and defocus", IJCV 2013) shows every coarse bit XOR the finest one
+//! instead: every frame is then made of stripes half a period wide, whose bounce averages out
+//! like the phase's, and the decoder XORs the finest bit back out.
 //!
 //! The Gray code names the half period, the phase the position within the period; the two
 //! are joined by taking the period whose phase lies nearest the Gray half-period's centre,
@@ -126,6 +137,39 @@ impl Frame {
     }
 }
 
+/// How the Gray bits are shown (see the module's notes on inter-reflection).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Code {
+    /// Each bit as it is: stripes from half the image wide down to half a period.
+    #[default]
+    Gray,
+    /// Each bit but the finest XOR the finest: stripes half a period wide in every frame.
+    Xor,
+}
+
+impl Code {
+    pub fn name(self) -> &'static str {
+        match self {
+            Code::Gray => "gray",
+            Code::Xor => "xor",
+        }
+    }
+}
+
+impl std::str::FromStr for Code {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Code> {
+        match s {
+            "gray" => Ok(Code::Gray),
+            "xor" => Ok(Code::Xor),
+            _ => Err(Error::invalid(
+                "code",
+                format!("must be `gray` or `xor`, got `{s}`"),
+            )),
+        }
+    }
+}
+
 /// The pattern sequence for one projector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PatternSet {
@@ -133,6 +177,7 @@ pub struct PatternSet {
     pub height: u32,
     /// The phase-shift period, projector pixels; the finest Gray stripe is half of it.
     pub period: u32,
+    pub code: Code,
 }
 
 impl PatternSet {
@@ -148,7 +193,13 @@ impl PatternSet {
             width,
             height,
             period: PERIOD,
+            code: Code::Gray,
         })
+    }
+
+    /// The same sequence with its Gray bits shown in `code`.
+    pub fn with_code(self, code: Code) -> PatternSet {
+        PatternSet { code, ..self }
     }
 
     /// The same sequence with a phase period of `period` projector pixels (even, 8–256). Blur
@@ -228,7 +279,11 @@ impl PatternSet {
             Frame::Gray { axis, bit, inverse } => {
                 let half = i / (self.period / 2);
                 let gray = half ^ (half >> 1);
-                let on = (gray >> (self.bits(axis) - 1 - bit)) & 1 == 1;
+                let last = self.bits(axis) - 1;
+                let mut on = (gray >> (last - bit)) & 1 == 1;
+                if self.code == Code::Xor && bit < last {
+                    on ^= gray & 1 == 1;
+                }
                 if on != inverse { 255 } else { 0 }
             }
             Frame::Phase { step, .. } => {
@@ -285,41 +340,92 @@ pub fn correspondences(
     screen: &crate::surface::Screen,
     limit: usize,
 ) -> Vec<crate::calibration::Correspondence> {
+    spread(decoded, limit)
+        .filter_map(|(x, y, s)| {
+            let ray = camera.lens.unproject([f64::from(x), f64::from(y)]).ok()?;
+            let point = screen
+                .intersect(camera.position, camera.rotation * ray)
+                .point()?;
+            Some(crate::calibration::Correspondence {
+                pixel: s.q,
+                world: point.to_array(),
+            })
+        })
+        .take(limit)
+        .collect()
+}
+
+/// At most `limit` of the decoded camera pixels, on a regular lattice over them: the most
+/// confident of each lattice cell.
+fn spread(
+    decoded: &decode::Decoded,
+    limit: usize,
+) -> impl Iterator<Item = (u32, u32, decode::Sample)> + '_ {
     let valid = decoded.valid();
-    if valid == 0 || limit == 0 {
-        return Vec::new();
-    }
     // The lattice step that keeps at most `limit` of the decoded pixels.
-    let step = ((valid as f64 / limit as f64).sqrt().ceil() as u32).max(1);
-    let mut out = Vec::new();
-    for cy in (0..decoded.height).step_by(step as usize) {
-        for cx in (0..decoded.width).step_by(step as usize) {
-            let mut best: Option<(u32, u32, decode::Sample)> = None;
-            for y in cy..(cy + step).min(decoded.height) {
-                for x in cx..(cx + step).min(decoded.width) {
-                    if let Some(s) = decoded.get(x, y)
-                        && best.is_none_or(|b| s.sigma < b.2.sigma)
-                    {
-                        best = Some((x, y, s));
-                    }
+    let step = if valid == 0 || limit == 0 {
+        decoded.width.max(decoded.height).max(1)
+    } else {
+        ((valid as f64 / limit as f64).sqrt().ceil() as u32).max(1)
+    };
+    let cells_x = decoded.width.div_ceil(step);
+    let cells = cells_x * decoded.height.div_ceil(step);
+    (0..cells).filter_map(move |c| {
+        let (cx, cy) = ((c % cells_x) * step, (c / cells_x) * step);
+        let mut best: Option<(u32, u32, decode::Sample)> = None;
+        for y in cy..(cy + step).min(decoded.height) {
+            for x in cx..(cx + step).min(decoded.width) {
+                if let Some(s) = decoded.get(x, y)
+                    && best.is_none_or(|b| s.sigma < b.2.sigma)
+                {
+                    best = Some((x, y, s));
                 }
             }
-            let Some((x, y, s)) = best else { continue };
-            let Ok(ray) = camera.lens.unproject([f64::from(x), f64::from(y)]) else {
-                continue;
-            };
-            if let crate::surface::Hit::Lit { point, .. } =
-                screen.intersect(camera.position, camera.rotation * ray)
-            {
-                out.push(crate::calibration::Correspondence {
-                    pixel: s.q,
-                    world: point.to_array(),
-                });
-            }
         }
+        best
+    })
+}
+
+/// The camera's pose from a projector already calibrated (its lens and pose right): the
+/// projector coordinate decoded at a camera pixel, followed through the projector's model to
+/// the wall, is a marker there ([`camera_pose`]), and the decoded map gives thousands of them
+/// over the whole of the projector's image. This is how one camera, moved between shots,
+/// carries a calibration from projector to projector without surveyed fiducials. At most
+/// `limit` camera pixels are used; returns the camera with its pose replaced and the RMS
+/// reprojection error in camera pixels.
+pub fn camera_pose_from_projector(
+    decoded: &decode::Decoded,
+    camera: &crate::rig::Channel,
+    projector: &crate::rig::Channel,
+    screen: &crate::surface::Screen,
+    limit: usize,
+) -> Result<(crate::rig::Channel, f64)> {
+    let markers: Vec<_> = spread(decoded, limit)
+        .filter_map(|(x, y, s)| {
+            let ray = projector.lens.unproject(s.q).ok()?;
+            let point = screen
+                .intersect(projector.position, projector.rotation * ray)
+                .point()?;
+            Some(crate::calibration::Correspondence {
+                pixel: [f64::from(x), f64::from(y)],
+                world: point.to_array(),
+            })
+        })
+        .take(limit)
+        .collect();
+    if markers.len() < 50 {
+        return Err(Error::invalid(
+            "captures",
+            format!(
+                "only {} camera pixels of the posing projector `{}` were decoded on the wall \
+                 (rejected: {:?}); is it lit and in the camera's view?",
+                markers.len(),
+                projector.id,
+                decoded.rejected
+            ),
+        ));
     }
-    out.truncate(limit);
-    out
+    camera_pose(camera, &markers)
 }
 
 /// The camera's pose from markers: wall points of known position (surveyed fiducials, a
@@ -605,5 +711,63 @@ mod tests {
         // A y frame is constant along rows.
         assert!(a.data[..1920].iter().all(|&v| v == a.data[0]));
         assert!(set.frame(set.len(), "n").is_err());
+    }
+
+    /// The longest run of equal values in an x frame.
+    fn longest_run(set: &PatternSet, frame: Frame) -> usize {
+        let p = set.profile(frame);
+        p.chunk_by(|a, b| a == b).map(<[u8]>::len).max().unwrap()
+    }
+
+    #[test]
+    fn xor_frames_are_fine_stripes_that_decode_to_the_same_positions() {
+        let gray = PatternSet::new(256, 48).unwrap();
+        let xor = gray.with_code(Code::Xor);
+        let bits = gray.bits(Axis::X);
+        let frame = |bit| Frame::Gray {
+            axis: Axis::X,
+            bit,
+            inverse: false,
+        };
+        // Gray's first bit is half the image wide; every XOR frame's stripes are at most a
+        // period wide, the finest bit the same in both.
+        assert_eq!(longest_run(&gray, frame(0)), 128);
+        for bit in 0..bits {
+            assert!(longest_run(&xor, frame(bit)) <= 16, "bit {bit}");
+        }
+        assert_eq!(gray.profile(frame(bits - 1)), xor.profile(frame(bits - 1)));
+        // Shown straight to a camera of the projector's own pixels, each sequence decodes to
+        // every pixel's own position (but the border the decoder erodes), and only with its own
+        // code.
+        let opts = decode::DecodeOptions::default();
+        let right = |d: &decode::Decoded| {
+            d.samples
+                .iter()
+                .enumerate()
+                .filter_map(|(i, s)| Some((i as u32 % d.width, i as u32 / d.width, (*s)?)))
+                .filter(|(x, y, s)| (s.q[0] - f64::from(*x)).hypot(s.q[1] - f64::from(*y)) < 0.05)
+                .count()
+        };
+        for (set, other) in [(gray, xor), (xor, gray)] {
+            let frames: Vec<Grey> = set.frames().into_iter().map(|f| set.image(f)).collect();
+            let decoded = decode::decode(&set, &frames, &opts).unwrap();
+            let all = (256 - 4) * (48 - 4);
+            assert_eq!(
+                (decoded.valid(), right(&decoded)),
+                (all, all),
+                "{:?}",
+                set.code
+            );
+            let wrong = decode::decode(&other, &frames, &opts).unwrap();
+            assert!(
+                right(&wrong) < all / 2,
+                "{:?} read as {:?}: {} right",
+                set.code,
+                other.code,
+                right(&wrong)
+            );
+        }
+        assert_eq!("xor".parse::<Code>().unwrap(), Code::Xor);
+        assert!("grey".parse::<Code>().is_err());
     }
 }
