@@ -255,13 +255,7 @@ pub async fn post_captures(
         camera = run_job(&s, move |_| {
             crate::structured::camera_pose(&c, &markers)
                 .map(|(posed, _)| posed)
-                .map_err(|e| match e {
-                    crate::Error::Invalid { reason, .. } => ApiError::Invalid {
-                        field: "/markers".into(),
-                        reason,
-                    },
-                    other => other.into(),
-                })
+                .map_err(invalid_at("/markers"))
         })
         .await?;
     }
@@ -373,13 +367,7 @@ async fn pose_from(
             &decoded, &camera, &projector, &screen, points,
         )
         .map(|(posed, _)| posed)
-        .map_err(|e| match e {
-            crate::Error::Invalid { reason, .. } => ApiError::Invalid {
-                field: "/pose_from".into(),
-                reason,
-            },
-            other => other.into(),
-        })
+        .map_err(invalid_at("/pose_from"))
     })
     .await
 }
@@ -524,6 +512,17 @@ pub async fn post_wall(
 }
 
 /// A library error naming its field, as the API names it.
+/// A library refusal as a 400 naming `field` of the request, whatever the library called it.
+fn invalid_at(field: &'static str) -> impl Fn(crate::Error) -> ApiError {
+    move |e| match e {
+        crate::Error::Invalid { reason, .. } => ApiError::Invalid {
+            field: field.into(),
+            reason,
+        },
+        other => other.into(),
+    }
+}
+
 fn invalid_as_field(e: crate::Error) -> ApiError {
     match e {
         crate::Error::Invalid { name, reason } => ApiError::Invalid {
