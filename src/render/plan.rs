@@ -9,8 +9,11 @@ use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
-/// Rows per parallel task, and columns per strip within it (see `render_into`).
+/// Rows per parallel task, and columns per strip within it (see `render_into`). The bilinear
+/// loop takes taller bands, which with its prefetch of the next strip's first row measured
+/// 3–4 % faster at 4K (six paired runs of six) and no slower at 1080p; neither alone helped.
 const BAND_ROWS: usize = 8;
+const BILINEAR_BAND_ROWS: usize = 16;
 const STRIP_COLS: usize = 128;
 
 /// A warp resolved against one content layout: what every output sample reads.
@@ -254,21 +257,25 @@ impl Plan {
             // neighbouring texels, so a strip's texels are still in L1 when the next row needs
             // them, whichever way the warp runs through the texture.
             out.data
-                .par_chunks_mut(w * BAND_ROWS)
-                .zip(self.taps.par_chunks(w * BAND_ROWS))
+                .par_chunks_mut(w * BILINEAR_BAND_ROWS)
+                .zip(self.taps.par_chunks(w * BILINEAR_BAND_ROWS))
                 .for_each(|(band, taps)| {
                     let rows = band.len() / w;
                     for x0 in (0..w).step_by(STRIP_COLS) {
                         let x1 = (x0 + STRIP_COLS).min(w);
                         for r in 0..rows {
                             let span = r * w + x0..r * w + x1;
-                            // The next row of this strip: its texels are fetched while this
-                            // row is filtered. Every other tap is enough (a cache line holds 16
+                            // The row filtered next, this strip's next row or else the next
+                            // strip's first: its texels are fetched while this row is
+                            // filtered. Every other tap is enough (a cache line holds 16
                             // texels) and halves the cost.
-                            if r + 1 < rows {
-                                for t in taps[span.start + w..span.end + w].iter().step_by(2) {
-                                    prefetch(data, t.idx as usize, aw);
-                                }
+                            let next = if r + 1 < rows {
+                                span.start + w..span.end + w
+                            } else {
+                                x1..(x1 + STRIP_COLS).min(w)
+                            };
+                            for t in taps[next].iter().step_by(2) {
+                                prefetch(data, t.idx as usize, aw);
                             }
                             T::bilinear_span(data, aw, &taps[span.clone()], &mut band[span]);
                         }
