@@ -484,26 +484,10 @@ mod tests {
                 View::plain(projection::build("flat", &p, f64::from(h) / f64::from(w)).unwrap());
             let warp = Warp::View(&view);
             let dims = [w, h, 1];
-            let strips = Plan::build(
-                warp,
-                &content,
-                atlas,
-                dims,
-                Filter::Bilinear,
-                true,
-                Order::Strips,
-            )
-            .unwrap();
-            let rows = Plan::build(
-                warp,
-                &content,
-                atlas,
-                dims,
-                Filter::Bilinear,
-                true,
-                Order::Rows,
-            )
-            .unwrap();
+            let plan = |order| {
+                Plan::build(warp, &content, atlas, dims, Filter::Bilinear, true, order).unwrap()
+            };
+            let (strips, rows) = (plan(Order::Strips), plan(Order::Rows));
             assert_eq!(strips.order, Order::of(Filter::Bilinear, 1));
             let (w, h) = (w as usize, h as usize);
             let mut distinct = std::collections::HashSet::new();
