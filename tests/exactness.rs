@@ -343,7 +343,7 @@ fn redoing_the_rows_an_edit_reached_equals_planning_anew() {
         );
         let row = |p: &Plan, j: usize| {
             (0..w as usize)
-                .flat_map(|i| p.pixel(i, j).to_vec())
+                .flat_map(|i| p.pixel(i, j).iter().copied())
                 .collect::<Vec<_>>()
         };
         assert_eq!(row(&old, 10), row(&plan, 10), "rows far away are kept");

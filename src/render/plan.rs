@@ -301,15 +301,16 @@ impl Plan {
             x < self.width && y < self.height,
             "pixel ({x}, {y}) is outside the plan"
         );
+        let kk = (self.supersample * self.supersample) as usize;
         let i = match self.order {
-            Order::Rows => (y * self.width + x) * (self.supersample * self.supersample) as usize,
+            Order::Rows => (y * self.width + x) * kk,
             Order::Strips => {
                 let band = y - y % BILINEAR_BAND_ROWS;
                 let rows = BILINEAR_BAND_ROWS.min(self.height - band);
                 band * self.width + strip_index(x, y - band, rows, self.width)
             }
         };
-        &self.taps[i..i + (self.supersample * self.supersample) as usize]
+        &self.taps[i..i + kk]
     }
 
     /// Filters one frame of content through the plan.
