@@ -198,9 +198,7 @@ mod tests {
     fn simd_and_scalar_bicubic_agree_bit_for_bit() {
         let stride = 9;
         let mut next = crate::raster::xorshift(0x9e37_79b9_7f4a_7c15u64);
-        let data: Vec<[u8; 4]> = (0..stride * 8)
-            .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
-            .collect();
+        let data = crate::raster::random_texels(&mut next, stride * 8);
         let mut taps: Vec<Tap> = (0..5000)
             .map(|_| {
                 let r = next();

@@ -100,7 +100,7 @@ unsafe fn span_ssse3(data: &[[u8; 4]], stride: usize, taps: &[Tap], out: &mut [[
 /// Eight pixels at a time, in two steps of four that each fill both 128-bit halves of AVX2
 /// registers; the same bits as the SSSE3 kernel, in fewer instructions, which the frame waits
 /// on: with the content in cache a 4K frame took 15 % less time than with the earlier four-pixel
-/// kernel, and with 2048² faces, from memory, 8–12 % less (paired runs, 2026-12-04).
+/// kernel, and with 2048² faces, from memory, 6–10 % less (six paired runs, 2026-12-04).
 ///
 /// Per four pixels: the weights come from one load of their taps (six instructions where
 /// shifts and masks took twelve); each pixel's four texels are two 8-byte loads, the lower row
@@ -230,9 +230,7 @@ mod tests {
     fn simd_and_portable_kernels_agree_bit_for_bit() {
         let stride = 7;
         let mut next = crate::raster::xorshift(0x2545_f491_4f6c_dd1du64);
-        let data: Vec<[u8; 4]> = (0..stride * 6)
-            .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
-            .collect();
+        let data = crate::raster::random_texels(&mut next, stride * 6);
         // One tap in about seventeen covers nothing, so that some groups of four and of
         // eight the AVX2 kernel takes whole hold one and must go the careful way.
         let mut taps: Vec<Tap> = (0..2000)
@@ -292,9 +290,7 @@ mod tests {
     fn every_fraction_weighs_as_in_the_portable_kernel() {
         let stride = 16;
         let mut next = crate::raster::xorshift(0x9e37_79b9_7f4a_7c15u64);
-        let data: Vec<[u8; 4]> = (0..stride * 8)
-            .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
-            .collect();
+        let data = crate::raster::random_texels(&mut next, stride * 8);
         // fy runs through every value too, in another order (40503 is odd, so k ↦ 40503·k
         // permutes the 16-bit numbers).
         let taps: Vec<Tap> = (0..=u16::MAX)

@@ -17,6 +17,14 @@ pub(crate) fn xorshift(mut seed: u64) -> impl FnMut() -> u64 {
     }
 }
 
+/// `n` random RGBA8 texels from a [`xorshift`] stream.
+#[cfg(test)]
+pub(crate) fn random_texels(next: &mut impl FnMut() -> u64, n: usize) -> Vec<[u8; 4]> {
+    (0..n)
+        .map(|_| next().to_le_bytes()[..4].try_into().unwrap())
+        .collect()
+}
+
 use crate::error::{Error, Result};
 
 /// One output sample of a render plan (`render::Plan`): the atlas texel at or before the sample position, and the fraction of a
