@@ -1626,6 +1626,63 @@ async fn exports_keep_their_tolerance_on_an_exact_and_a_tile_edited_channel() {
     }
 }
 
+/// The tiles' f shows in full-scale previews, built or rebuilt after an edit: with f = 0 at a
+/// feature the picture there turns grey (the frame reads the warp's own f at full scale,
+/// and a subsampled copy otherwise).
+#[tokio::test]
+async fn full_scale_previews_show_the_tiles_f() {
+    let s = state_with(
+        None,
+        None,
+        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
+    );
+    let colour = |png: &[u8]| {
+        let img = image::load_from_memory(png).unwrap().into_rgba8();
+        // The least spread between channels around feature (16, 9) of the 33 × 19 grid, at
+        // the middle of the 1920 × 1080 channel (f rises quickly away from the feature).
+        let mut spread = u8::MAX;
+        for y in 535..546 {
+            for x in 955..966 {
+                let [r, g, b, _] = img.get_pixel(x, y).0;
+                spread = spread.min(r.max(g).max(b) - r.min(g).min(b));
+            }
+        }
+        spread
+    };
+    let q = "/v1/channels/centre/render?scale=1";
+    let steps = [(9.0, 1.0, "built"), (9.0, 0.0, "rows"), (8.5, 0.0, "rows")];
+    for (revision, (theta, f, how)) in (1..).zip(steps) {
+        let body = edits(serde_json::json!([
+            {"op": "set_feature", "column": 16, "row": 9, "theta": theta, "f": f}
+        ]));
+        let (st, _, reply) = call(
+            &s,
+            write("PATCH", "/v1/channels/centre/tiles", Some(revision), body),
+        )
+        .await;
+        assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&reply));
+        let (st, h, png) = call(&s, get(q)).await;
+        assert_eq!(st, StatusCode::OK);
+        let made = h["x-omniwarp-preview"].to_str().unwrap();
+        assert!(
+            made.starts_with(how),
+            "f {f}: made `{made}`, expected {how}"
+        );
+        let spread = colour(&png);
+        if f == 1.0 {
+            assert!(
+                spread > 40,
+                "the pattern there is coloured: least spread {spread}"
+            );
+        } else {
+            assert!(
+                spread <= 2,
+                "f = 0 there, yet a least channel spread of {spread}"
+            );
+        }
+    }
+}
+
 /// Previews are kept ready between requests (issue 15, item 3): a repeated one renders from
 /// what was kept, and one after a local tile edit rebuilds its plan only in the rows the edit
 /// reaches. Either way the picture is, pixel for pixel, the one a daemon that never saw the
