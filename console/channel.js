@@ -73,8 +73,20 @@ export class ChannelView {
   async open(id, size) {
     this.id = id;
     this.size = size;
+    // Nothing of the channel shown before may stay under this one's title until its own tiles
+    // arrive: a press on a stale handle would edit this channel with the other's features and
+    // revision, and a stale picture would pass for its preview.
+    this.tiles = null;
+    this.revision = null;
     this.picks = [];
+    this.drag = null;
     this.closeForm();
+    this.$('#tiles-revision').textContent = 'loading the tiles…';
+    this.draw();
+    this.previewSerial++;
+    if (this.preview.src.startsWith('blob:')) URL.revokeObjectURL(this.preview.src);
+    this.preview.removeAttribute('src');
+    delete this.preview.dataset.etag;
     this.$('#zoomer').style.aspectRatio = `${size[0]} / ${size[1]}`;
     this.overlay.setAttribute('viewBox', `0 0 ${size[0]} ${size[1]}`);
     await Promise.all([this.loadTiles(), this.loadPreview()]);
@@ -266,24 +278,30 @@ export class ChannelView {
     }
     this.draw();
     if (!drag.moving) return;
-    await this.enqueue(() => this.pull(drag.picks, drag.d, drag.base));
+    await this.enqueue(this.id, () => this.pull(this.id, drag.picks, drag.d, drag.base));
   }
 
   // This console's writes go one after another, so a nudge sent while the last one is in flight
-  // starts from the revision that one made instead of conflicting with it.
-  enqueue(task) {
-    const run = this.queue.then(task, task);
+  // starts from the revision that one made instead of conflicting with it. A write queued for
+  // one channel is not made once another is open: its edits are worked out from the tiles shown.
+  enqueue(id, task) {
+    const guarded = () => {
+      if (id === this.id) return task();
+      this.app.notify(`an edit of ${id} was not sent: ${this.id} was opened before its turn`, 'warn');
+    };
+    const run = this.queue.then(guarded, guarded);
     this.queue = run.catch(() => {});
     return run;
   }
 
-  async pull(picks, d, base) {
+  async pull(id, picks, d, base) {
+    if (!this.loaded()) return;
     const edits = pullEdits(this.tiles, picks, d[0], d[1], this.size[0], this.size[1]);
     if (!edits.length) {
       this.app.notify('nothing to move: the features picked have no usable neighbours', 'warn');
       return;
     }
-    await this.patch(edits, base);
+    await this.patch(id, edits, base);
   }
 
   key(e) {
@@ -293,15 +311,18 @@ export class ChannelView {
     if (!d) return;
     e.preventDefault();
     const picks = [...this.picks];
-    this.enqueue(() => this.pull(picks, d, this.revision));
+    const id = this.id;
+    this.enqueue(id, () => this.pull(id, picks, d, this.revision));
   }
 
-  // Sends edits made against revision `base`; a conflict is shown, never dropped.
-  async patch(edits, base, merge = false) {
+  // Sends edits of channel `id` made against revision `base`; a conflict is shown, never
+  // dropped, and choosing what to do about it still writes to that channel.
+  async patch(id, edits, base, merge = false) {
     try {
-      const r = await this.app.api.write('PATCH', `/v1/channels/${this.id}/tiles`, { edits, merge }, base);
-      this.app.notify(`tiles revision ${r.revision}`);
+      const r = await this.app.api.write('PATCH', `/v1/channels/${id}/tiles`, { edits, merge }, base);
+      this.app.notify(`tiles revision ${r.revision} of ${id}`);
       this.app.clearConflict();
+      if (id !== this.id) return true;
       await this.loadTiles();
       if (this.form) this.form.base = this.revision;
       this.showForm();
@@ -309,17 +330,18 @@ export class ChannelView {
     } catch (e) {
       if (e instanceof ApiError && e.status === 412) {
         this.app.conflict({
-          what: `the tiles of ${this.id}`,
+          what: `the tiles of ${id}`,
           note: merge ? 'The daemon could not merge: a revision since changed the same features.' : '',
           mine: edits,
           base,
           current: e.current,
           reload: async () => {
+            if (id !== this.id) return;
             this.closeForm();
             await this.loadTiles();
           },
-          reapply: () => this.patch(edits, e.current),
-          merge: () => this.patch(edits, base, true),
+          reapply: () => this.patch(id, edits, e.current),
+          merge: () => this.patch(id, edits, base, true),
         });
       } else {
         this.app.notify(this.app.describe(e), 'error');
@@ -328,7 +350,15 @@ export class ChannelView {
     }
   }
 
+  // Whether this channel's tiles have arrived; says so when they have not.
+  loaded() {
+    if (this.tiles) return true;
+    this.app.notify(`the tiles of ${this.id} are still loading`, 'warn');
+    return false;
+  }
+
   async tileOp(op) {
+    if (!this.loaded()) return;
     const sel = this.picks[0];
     const around = span(this.picks);
     const number = (name) => Number(this.$(`#${name}`).value);
@@ -358,10 +388,11 @@ export class ChannelView {
       return;
     }
     this.picks = [];
-    await this.patch(edits, this.revision);
+    await this.patch(this.id, edits, this.revision);
   }
 
   async history(action) {
+    if (!this.loaded()) return;
     try {
       const r = await this.app.api.write('POST', `/v1/channels/${this.id}/tiles/${action}`, {}, this.revision);
       this.app.notify(`${action}: tiles revision ${r.revision} (as revision ${r.body.from})`);
@@ -410,6 +441,6 @@ export class ChannelView {
       }
       edit[k] = v;
     }
-    await this.patch([edit], this.form.base);
+    await this.patch(this.id, [edit], this.form.base);
   }
 }

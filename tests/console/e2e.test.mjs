@@ -175,7 +175,24 @@ test('dragging a feature changes the preview and the tile revision on disk', asy
 test('two technicians: a conflict is shown and resolved, no acknowledged edit lost', async () => {
   await step('conflict', async () => {
     pageB = await open(b);
+    // B shows left (tiles revision 1) first. Until centre's own tiles and preview arrive,
+    // nothing of left may stay under centre's title: a press on a stale handle would edit
+    // centre with left's features and revision. Centre's requests are held back to look.
+    let release;
+    const held = new Promise((r) => (release = r));
+    await pageB.route('**/v1/channels/centre/**', async (route) => {
+      await held;
+      await route.continue();
+    });
+    await pageB.click('#channels li[data-channel="centre"] button');
+    await pageB.waitForFunction(() => document.querySelector('#channel-title').textContent === 'centre');
+    assert.equal(await pageB.locator('#overlay circle').count(), 0, "no handles before centre's tiles");
+    assert.equal(await pageB.textContent('#tiles-revision'), 'loading the tiles…');
+    assert.equal(await pageB.getAttribute('#preview', 'data-etag'), null, "left's preview is not shown as centre's");
+    release();
+    await pageB.unrouteAll({ behavior: 'wait' });
     await selectChannel(pageB, 'centre');
+    await tilesRevision(pageB, 2);
     // B opens the feature's form at revision 2 …
     await pageB.click(`#overlay circle[data-column="16"][data-row="9"]`);
     await pageB.waitForSelector('#feature-form:not([hidden])');
@@ -260,6 +277,34 @@ test('a region picked by rectangle moves as one; rapid keyboard nudges queue, no
     await tilesRevision(pageA, 12);
     const two = await api('/v1/channels/centre/tiles?revision=2');
     assert.deepEqual((await api('/v1/channels/centre/tiles')).tiles.layout, two.tiles.layout);
+  });
+});
+
+test('a nudge queued behind a write is not sent to the channel opened meanwhile', async () => {
+  await step('queued', async () => {
+    const left = (await api('/v1/channels/left/tiles')).revision;
+    const centre = (await api('/v1/channels/centre/tiles')).revision;
+    // Centre's first nudge is held on its way to the daemon; the second queues behind it; then
+    // left is opened. The second was worked out from centre's tiles: it must not go to left.
+    let release;
+    const held = new Promise((r) => (release = r));
+    await pageA.route('**/v1/channels/centre/tiles', async (route) => {
+      if (route.request().method() === 'PATCH') await held;
+      await route.continue();
+    });
+    const [x, y] = await handle(pageA, 16, 9);
+    await pageA.mouse.click(x, y);
+    await pageA.keyboard.press('ArrowRight');
+    await pageA.keyboard.press('ArrowRight');
+    await selectChannel(pageA, 'left');
+    release();
+    await pageA.waitForFunction(() => /an edit of centre was not sent/.test(document.querySelector('#notice').textContent), null, {
+      timeout: 10000,
+    });
+    await pageA.unrouteAll({ behavior: 'wait' });
+    assert.equal((await api('/v1/channels/left/tiles')).revision, left, 'left untouched');
+    assert.equal((await api('/v1/channels/centre/tiles')).revision, centre + 1, 'the nudge sent went to centre');
+    await selectChannel(pageA, 'centre');
   });
 });
 
