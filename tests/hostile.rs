@@ -7,7 +7,7 @@ mod common;
 
 use axum::body::Body;
 use axum::http::{Request, StatusCode, header};
-use common::server::{call, flat_rig, get, json, start, state, state_with, write};
+use common::server::{call, demo_rig, demo_state, flat_rig, get, json, start, state, write};
 use omniwarp::server::client::Client;
 use omniwarp::server::{AppState, OpenOptions, Options, Store};
 use std::io::{Read, Write};
@@ -443,11 +443,7 @@ fn workers(body: &[u8]) -> (u64, u64) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn c9_a_calibration_stops_when_its_client_goes_away_and_frees_its_worker() {
-    let s = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let s = demo_state();
     let body = big_calibration(&s);
     let post = call(
         &s,
@@ -803,7 +799,7 @@ fn d2_damaged_state_stops_the_start_even_with_demo_unless_reset() {
     // A sector of garbage over the header: no longer a database SQLite opens.
     bytes[..512].fill(0x5a);
     std::fs::write(&db, &bytes).unwrap();
-    let demo: omniwarp::rig::RigDoc = serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap();
+    let demo = demo_rig();
     let refused = Store::open(Some(dir.path().to_path_buf()), Some(demo.clone()));
     let why = refused
         .err()

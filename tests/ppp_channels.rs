@@ -4,13 +4,13 @@
 
 mod common;
 
-use common::server::{call, get, json, state, state_with};
+use common::server::{call, demo_rig, demo_state, get, json, state};
 use omniwarp::raster::{Raster, psnr};
-use omniwarp::rig::{Rig, RigDoc};
+use omniwarp::rig::Rig;
 use omniwarp::scene::ppp::{Directions, Pieces, Tolerance};
 
 fn demo() -> Rig {
-    Rig::from_doc(serde_json::from_str::<RigDoc>(omniwarp::rig::DEMO_RIG).unwrap()).unwrap()
+    Rig::from_doc(demo_rig()).unwrap()
 }
 
 /// Every mapped pixel of every demo channel is drawn by a piece, no unmapped one is, and the
@@ -96,11 +96,7 @@ async fn scene_preview(
 /// its default face; the GPU and its CPU twin agree; auto picks one of the two and says which.
 #[tokio::test(flavor = "multi_thread")]
 async fn scene_previews_draw_by_the_method_asked() {
-    let s = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let s = demo_state();
     let base = "scene=city:small&scale=4";
     let (exact, said) = scene_preview(&s, &format!("{base}&method=exact")).await;
     assert!(said.starts_with("exact"), "{said}");

@@ -5,7 +5,7 @@
 mod common;
 
 use axum::http::{StatusCode, header};
-use common::server::{call, flat_rig, get, json, state, state_with, write};
+use common::server::{call, demo_state, flat_rig, get, json, state, state_with, write};
 use omniwarp::export::grid::Layout;
 use omniwarp::export::mpcdi;
 use omniwarp::export::{bourke, parse_pfm};
@@ -816,11 +816,7 @@ async fn the_cli_and_the_daemon_read_one_correspondences_format() {
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/examples/points.json"),
     )
     .unwrap();
-    let demo = common::server::state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let demo = common::server::demo_state();
     let (st, _, body) = call(
         &demo,
         write("POST", "/v1/channels/left/calibration", None, file.clone()),
@@ -918,11 +914,7 @@ async fn put_tiles_replaces_the_screen_with_revisions_and_validation() {
 /// φ 134.8° to 66.6°).
 #[tokio::test]
 async fn smoothing_an_untouched_screen_keeps_the_wall_end() {
-    let demo = common::server::state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let demo = common::server::demo_state();
     let features = |body: &[u8]| -> Vec<serde_json::Value> {
         json(body)["tiles"]["layout"]["features"]
             .as_array()
@@ -1047,11 +1039,7 @@ fn readme_patch() -> String {
 async fn the_readme_walkthrough_patch_keeps_the_wall_edge() {
     let patch = readme_patch();
     let body = format!("{{\"edits\": {patch}}}");
-    let demo = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let demo = demo_state();
     let (_, _, exact) = call(&demo, get("/v1/channels/centre/warp.exr")).await;
     let (st, _, reply) = call(
         &demo,
@@ -1138,11 +1126,7 @@ async fn default_previews_have_no_cube_stair_steps() {
 /// subdivision, coarsening, refinement) keep it within 0.5°; the refinement ops within 0.01°.
 #[tokio::test]
 async fn every_edit_op_keeps_the_wall_edge_of_a_straddling_screen() {
-    let demo = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let demo = demo_state();
     let (_, _, exact) = call(&demo, get("/v1/channels/right/warp.exr")).await;
     let (_, _, sampled) = call(&demo, get("/v1/channels/right/tiles")).await;
     let t = json(&sampled)["tiles"]["layout"].clone();
@@ -1327,11 +1311,7 @@ async fn mpcdi_alpha_maps_are_8_bit_unless_asked_and_decode_in_an_8_bit_reader()
 /// the lit pixels along both edges were darkened).
 #[tokio::test]
 async fn bourke_meshes_give_lit_pixels_their_weight_at_the_wall_edge() {
-    let demo = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let demo = demo_state();
     let (st, _, body) = call(
         &demo,
         get("/v1/channels/centre/exports/mesh.data?tolerance=2"),
@@ -1480,11 +1460,7 @@ fn triangle_reader(
 #[tokio::test]
 async fn exports_keep_their_tolerance_on_an_exact_and_a_tile_edited_channel() {
     let patch = readme_patch();
-    let demo = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let demo = demo_state();
     let (_, _, body) = call(&demo, get("/v1/channels/centre/content")).await;
     let canvas: omniwarp::server::Canvas =
         serde_json::from_value(json(&body)["content"].clone()).unwrap();
@@ -1631,11 +1607,7 @@ async fn exports_keep_their_tolerance_on_an_exact_and_a_tile_edited_channel() {
 /// and a subsampled copy otherwise).
 #[tokio::test]
 async fn full_scale_previews_show_the_tiles_f() {
-    let s = state_with(
-        None,
-        None,
-        serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-    );
+    let s = demo_state();
     let colour = |png: &[u8]| {
         let img = image::load_from_memory(png).unwrap().into_rgba8();
         // The least spread between channels around feature (16, 9) of the 33 × 19 grid, at
@@ -1689,13 +1661,7 @@ async fn full_scale_previews_show_the_tiles_f() {
 /// earlier requests renders.
 #[tokio::test]
 async fn previews_are_kept_and_rebuilt_only_where_an_edit_reaches() {
-    let demo = || {
-        state_with(
-            None,
-            None,
-            serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap(),
-        )
-    };
+    let demo = || demo_state();
     let q = "/v1/channels/centre/render?scale=2&content=checker";
     let preview = |s: std::sync::Arc<omniwarp::server::AppState>| async move {
         let (st, h, png) = call(&s, get(q)).await;

@@ -37,6 +37,16 @@ pub fn state_with(dir: Option<&Path>, token: Option<&str>, rig: RigDoc) -> Arc<A
     )
 }
 
+/// The daemon's built-in demo rig (three channels on a cylinder), as `serve --demo` holds it.
+pub fn demo_rig() -> RigDoc {
+    serde_json::from_str(omniwarp::rig::DEMO_RIG).unwrap()
+}
+
+/// In-memory state holding the demo rig, with no token.
+pub fn demo_state() -> Arc<AppState> {
+    state_with(None, None, demo_rig())
+}
+
 pub fn state(dir: Option<&Path>, token: Option<&str>) -> Arc<AppState> {
     state_with(dir, token, flat_rig())
 }
