@@ -221,6 +221,10 @@ export class ContentPanel {
 
   async load(id) {
     this.id = id;
+    // Until this channel's canvas arrives the form still holds the last one's: saved now, it
+    // would be written to this channel.
+    this.revision = null;
+    $('#content-revision').textContent = 'loading the content…';
     const { body, revision } = await this.app.api.get(`/v1/channels/${id}/content`);
     if (id !== this.id) return;
     this.revision = revision;
@@ -260,22 +264,32 @@ export class ContentPanel {
     return canvas;
   }
 
-  async save(base = this.revision) {
-    const body = this.body();
+  // Whether this channel's canvas has arrived; says so when it has not.
+  loaded() {
+    if (this.revision !== null) return true;
+    this.app.notify(`the content of ${this.id} is still loading`, 'warn');
+    return false;
+  }
+
+  // A conflict's reapply sends the same canvas to the same channel, whatever is open by then.
+  async save(base = this.revision, id = this.id, body = this.body()) {
+    if (base === null && !this.loaded()) return;
     try {
-      const r = await this.app.api.write('PUT', `/v1/channels/${this.id}/content`, body, base);
-      this.app.notify(`content revision ${r.revision}`);
+      const r = await this.app.api.write('PUT', `/v1/channels/${id}/content`, body, base);
+      this.app.notify(`content revision ${r.revision} of ${id}`);
       this.app.clearConflict();
-      await this.load(this.id);
+      if (id === this.id) await this.load(id);
     } catch (e) {
       if (e instanceof ApiError && e.status === 412) {
         this.app.conflict({
-          what: `the content of ${this.id}`,
+          what: `the content of ${id}`,
           mine: body,
           base,
           current: e.current,
-          reload: () => this.load(this.id),
-          reapply: () => this.save(e.current),
+          reload: async () => {
+            if (id === this.id) await this.load(id);
+          },
+          reapply: () => this.save(e.current, id, body),
         });
       } else {
         this.app.notify(this.app.describe(e), 'error');
@@ -284,6 +298,7 @@ export class ContentPanel {
   }
 
   async history(action) {
+    if (!this.loaded()) return;
     try {
       const r = await this.app.api.write('POST', `/v1/channels/${this.id}/content/${action}`, {}, this.revision);
       this.app.notify(`${action}: content revision ${r.revision}`);
@@ -324,18 +339,19 @@ export class PatternPanel {
   }
 
   async send(show) {
+    const id = this.id;
     try {
-      await this.app.api.write('PUT', `/v1/channels/${this.id}/show`, { show }, this.revision);
+      await this.app.api.write('PUT', `/v1/channels/${id}/show`, { show }, this.revision);
     } catch (e) {
       if (!(e instanceof ApiError && e.status === 412)) {
         this.app.notify(this.app.describe(e), 'error');
         return;
       }
       // Last choice wins for a test card: nothing is lost by sending it again.
-      await this.app.api.write('PUT', `/v1/channels/${this.id}/show`, { show }, e.current);
+      await this.app.api.write('PUT', `/v1/channels/${id}/show`, { show }, e.current);
     }
-    this.app.notify(`${this.id} shows ${show}`);
-    await this.load(this.id);
+    this.app.notify(`${id} shows ${show}`);
+    if (id === this.id) await this.load(id);
   }
 }
 

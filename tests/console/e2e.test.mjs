@@ -356,9 +356,24 @@ test('the MPCDI package downloads', async () => {
 // projector's view, which no 2d grid follows (the MPCDI export is then a 422 saying so).
 test('the content canvas from its pads: turned, O set, projected from a point', async () => {
   await step('content', async () => {
+    // A shows left. Centre's canvas is held back: until it arrives the form still holds left's,
+    // and saving it must not write left's canvas to centre.
+    let release;
+    const held = new Promise((r) => (release = r));
+    await pageA.route('**/v1/channels/centre/content', async (route) => {
+      await held;
+      await route.continue();
+    });
     await pageA.click('[data-tab=channel]');
     await selectChannel(pageA, 'centre');
     await pageA.click('[data-tab=content]');
+    assert.equal(await pageA.textContent('#content-revision'), 'loading the content…');
+    await pageA.click('#content-form button[type=submit]');
+    await pageA.waitForFunction(() => /the content of centre is still loading/.test(document.querySelector('#notice').textContent));
+    release();
+    await pageA.unrouteAll({ behavior: 'wait' });
+    await pageA.waitForFunction(() => document.querySelector('#content-revision').textContent === 'content revision 1');
+    assert.equal((await api('/v1/channels/centre/content')).revision, 1, 'nothing was saved to centre while it loaded');
     const pad = await pageA.locator('#aim-pad').boundingBox();
     // Three quarters across is azimuth +90°, the middle height the horizon.
     await pageA.mouse.click(pad.x + pad.width * 0.75, pad.y + pad.height / 2);
