@@ -168,10 +168,12 @@ class App {
       if (change.channel) this.channelStatus(change.channel);
       if (['tiles', 'content'].includes(change.kind)) this.historyPanel.load();
       if (!affects(change, this.channel)) return;
-      if (change.kind === 'tiles' && change.revision !== this.view.revision) {
-        await Promise.all([this.view.loadTiles(), this.view.loadPreview()]);
-      } else if (change.kind === 'content' && change.revision !== this.content.revision) {
-        await Promise.all([this.content.load(this.channel), this.view.loadPreview()]);
+      if (change.kind === 'tiles') {
+        await this.view.changed('tiles', change.revision);
+      } else if (change.kind === 'content') {
+        const jobs = [this.view.changed('content', change.revision)];
+        if (change.revision !== this.content.revision) jobs.push(this.content.load(this.channel));
+        await Promise.all(jobs);
       } else if (change.kind === 'show') {
         await this.patterns.load(this.channel);
       }

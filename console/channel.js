@@ -19,6 +19,7 @@ export class ChannelView {
     this.form = null; // { column, row, base } while the feature form is open
     this.drag = null;
     this.previewSerial = 0;
+    this.shown = { tiles: null, content: null }; // the revisions a preview was last asked for
     this.zoom = 1;
     this.touches = new Map();
     this.queue = Promise.resolve();
@@ -84,6 +85,7 @@ export class ChannelView {
     this.$('#tiles-revision').textContent = 'loading the tiles…';
     this.draw();
     this.previewSerial++;
+    this.shown = { tiles: null, content: null };
     if (this.preview.src.startsWith('blob:')) URL.revokeObjectURL(this.preview.src);
     this.preview.removeAttribute('src');
     delete this.preview.dataset.etag;
@@ -104,6 +106,19 @@ export class ChannelView {
     }`;
     this.draw();
     this.showForm();
+  }
+
+  // After a change to this channel's tiles or content canvas to revision n, the tiles and the
+  // preview are asked for again once, whichever arrives first: the answer to this console's own
+  // write or the feed's notice of it (their order is not fixed on a busy machine). Only the
+  // tiles are waited for: the next queued nudge starts from them, and must not wait for a
+  // render as well.
+  async changed(kind, n) {
+    if (this.shown[kind] !== n) {
+      this.shown[kind] = n;
+      this.loadPreview();
+    }
+    if (kind === 'tiles' && n !== this.revision) await this.loadTiles();
   }
 
   previewUrl() {
@@ -323,7 +338,7 @@ export class ChannelView {
       this.app.notify(`tiles revision ${r.revision} of ${id}`);
       this.app.clearConflict();
       if (id !== this.id) return true;
-      await this.loadTiles();
+      await this.changed('tiles', r.revision);
       if (this.form) this.form.base = this.revision;
       this.showForm();
       return true;
@@ -377,7 +392,7 @@ export class ChannelView {
       try {
         const r = await this.app.api.write('DELETE', `/v1/channels/${this.id}/tiles`, undefined, this.revision);
         this.app.notify(`tiles revision ${r.revision}: following the geometry again`);
-        await this.loadTiles();
+        await this.changed('tiles', r.revision);
       } catch (e) {
         this.app.notify(this.app.describe(e), 'error');
       }
@@ -396,7 +411,7 @@ export class ChannelView {
     try {
       const r = await this.app.api.write('POST', `/v1/channels/${this.id}/tiles/${action}`, {}, this.revision);
       this.app.notify(`${action}: tiles revision ${r.revision} (as revision ${r.body.from})`);
-      await this.loadTiles();
+      await this.changed('tiles', r.revision);
     } catch (e) {
       if (e instanceof ApiError && e.status === 412) await this.loadTiles();
       this.app.notify(this.app.describe(e), 'error');

@@ -278,7 +278,7 @@ export class ContentPanel {
       const r = await this.app.api.write('PUT', `/v1/channels/${id}/content`, body, base);
       this.app.notify(`content revision ${r.revision} of ${id}`);
       this.app.clearConflict();
-      if (id === this.id) await this.load(id);
+      if (id === this.id) await Promise.all([this.load(id), this.app.view.changed('content', r.revision)]);
     } catch (e) {
       if (e instanceof ApiError && e.status === 412) {
         this.app.conflict({
@@ -299,10 +299,11 @@ export class ContentPanel {
 
   async history(action) {
     if (!this.loaded()) return;
+    const id = this.id;
     try {
-      const r = await this.app.api.write('POST', `/v1/channels/${this.id}/content/${action}`, {}, this.revision);
-      this.app.notify(`${action}: content revision ${r.revision}`);
-      await this.load(this.id);
+      const r = await this.app.api.write('POST', `/v1/channels/${id}/content/${action}`, {}, this.revision);
+      this.app.notify(`${action}: content revision ${r.revision} of ${id}`);
+      if (id === this.id) await Promise.all([this.load(id), this.app.view.changed('content', r.revision)]);
     } catch (e) {
       this.app.notify(this.app.describe(e), 'error');
     }

@@ -303,7 +303,8 @@ test('a nudge queued behind a write is not sent to the channel opened meanwhile'
     });
     await pageA.unrouteAll({ behavior: 'wait' });
     assert.equal((await api('/v1/channels/left/tiles')).revision, left, 'left untouched');
-    assert.equal((await api('/v1/channels/centre/tiles')).revision, centre + 1, 'the nudge sent went to centre');
+    const now = await api('/v1/channels/centre/tiles');
+    assert.equal(now.revision, centre + 1, `the nudge sent went to centre: ${centre} → ${now.revision}; ${await pageA.textContent('#notice')}`);
     await selectChannel(pageA, 'centre');
   });
 });
@@ -392,6 +393,75 @@ test('the content canvas from its pads: turned, O set, projected from a point', 
     assert.ok(near(content.project_from, [0.5, 0, 0], 0.03), `from ${content.project_from}`);
     await pageA.click('[data-tab=channel]');
   });
+});
+
+// A console whose feed never connects, on centre: the answers to its own writes are all it has.
+async function feedless() {
+  const context = await browser.newContext({ viewport: { width: 1280, height: 900 } });
+  await context.route('**/v1/events', (route) => route.abort());
+  const page = await context.newPage();
+  pages.push(page);
+  await page.goto(`${base}/`);
+  await page.waitForSelector('#channels li >> nth=2');
+  await page.waitForFunction(() => document.querySelector('#feed-state').textContent === 'offline');
+  await selectChannel(page, 'centre');
+  await page.waitForSelector('#preview[data-etag]');
+  const close = async () => {
+    pages.splice(pages.indexOf(page), 1);
+    await context.close();
+  };
+  return { page, close };
+}
+
+// The answer to a console's own write and the feed's notice of it arrive in either order on a
+// busy machine; with the feed down entirely, the answer alone must bring the preview up to date.
+test('with the feed down, a console still shows its own edits in its preview', async () => {
+  const { page, close } = await feedless();
+  try {
+    await step('feedless', async () => {
+      const tiles = (await api('/v1/channels/centre/tiles')).revision;
+      let etag = await page.getAttribute('#preview', 'data-etag');
+      await drag(page, 16, 9, 0, -12);
+      await tilesRevision(page, tiles + 1);
+      await page.waitForFunction((e) => document.querySelector('#preview').dataset.etag !== e, etag, { timeout: 10000 });
+      // The preview follows the content canvas through its projection centre.
+      etag = await page.getAttribute('#preview', 'data-etag');
+      await page.click('[data-tab=content]');
+      await page.waitForFunction(() => /^content revision \d+$/.test(document.querySelector('#content-revision').textContent));
+      await page.fill('#content-form input[name=project_from]', '0.25, 0, 0');
+      await page.click('#content-form button[type=submit]');
+      await page.waitForFunction((e) => document.querySelector('#preview').dataset.etag !== e, etag, { timeout: 10000 });
+    });
+  } finally {
+    await close();
+  }
+});
+
+// Without the feed, the answer to a nudge is what starts its preview; the next nudge waits for
+// that answer's tiles, not for the render.
+test('a nudge does not wait for the preview of the one before it', async () => {
+  const { page, close } = await feedless();
+  let release;
+  const held = new Promise((r) => (release = r));
+  try {
+    await step('unwaited', async () => {
+      const n = (await api('/v1/channels/centre/tiles')).revision;
+      await page.route((url) => url.pathname === '/v1/channels/centre/render', async (route) => {
+        await held;
+        await route.continue().catch(() => {});
+      });
+      const [x, y] = await handle(page, 16, 9);
+      await page.mouse.click(x, y);
+      await page.keyboard.press('ArrowRight');
+      await tilesRevision(page, n + 1);
+      await page.keyboard.press('ArrowRight');
+      await tilesRevision(page, n + 2);
+      assert.equal((await api('/v1/channels/centre/tiles')).revision, n + 2);
+    });
+  } finally {
+    release();
+    await close();
+  }
 });
 
 test('a tablet with the token: asked for it, then a touch drag edits a channel', async () => {
