@@ -27,3 +27,6 @@ pub mod surface;
 pub mod tiles;
 
 pub use error::{Error, Outside, Result};
+/// The vector and matrix types of the public API (`DVec3`, `DMat3`, …), re-exported so that a
+/// caller uses the same glam as the crate.
+pub use glam;

@@ -1,6 +1,6 @@
 //! Every size, count and iteration a client or a file can set, in one place. A value past its
 //! limit is refused with an error naming the field, the value and the limit, before any work or
-//! allocation it would cause. README ("Limits") and `api/openapi.yaml` list the same numbers; a
+//! allocation it would cause. docs/limits.md and `api/openapi.yaml` list the same numbers; a
 //! test reads them from here.
 
 use crate::error::{Error, Result};

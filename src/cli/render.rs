@@ -18,10 +18,10 @@ use omniwarp::gpu::frame::{FrameOptions, SceneRenderer};
 use omniwarp::gpu::warp::Source;
 use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::View;
-use omniwarp::raster::{Pixel, Raster};
+use omniwarp::raster::Raster;
 use omniwarp::render::blur::Blur;
 use omniwarp::render::{self, Warp};
-use omniwarp::rig::{Channel, Rig};
+use omniwarp::rig::{Channel, Rig, apply_gains, signal_gains};
 use omniwarp::scene::ppp::{Pieces, Tolerance};
 use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
@@ -156,7 +156,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 saturation(&mut r, e);
             }
             if let Some(m) = &mask {
-                apply_mask(&mut r, m);
+                apply_gains(&mut r, m)?;
             }
             AnyRaster::U8(r)
         }
@@ -166,7 +166,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 saturation(&mut r, e);
             }
             if let Some(m) = &mask {
-                apply_mask(&mut r, m);
+                apply_gains(&mut r, m)?;
             }
             AnyRaster::F32(r)
         }
@@ -185,7 +185,7 @@ pub fn render_inputs(
     let rig = read_rig(path)?;
     let ch = channel(&rig, id)?;
     let w = rig.warp(ch);
-    let mask = signal_mask(&rig, ch, &w.points, gamma);
+    let mask = signal_mask(&rig, ch, &w.points, gamma)?;
     let map = match project_from {
         Some(c) => {
             let c = rig.check_centre(c, "project-from").map_err(flag_error)?;
@@ -199,22 +199,8 @@ pub fn render_inputs(
 }
 
 /// The blend weights of a channel's pixels in signal space, m = w^(1/γ).
-fn signal_mask(rig: &Rig, ch: &Channel, points: &[Option<DVec3>], gamma: f64) -> Vec<f32> {
-    rig.blend_weights(ch, points)
-        .iter()
-        .map(|&x| (f64::from(x).powf(1.0 / gamma)) as f32)
-        .collect()
-}
-
-/// Scales each pixel's colour (not its alpha) by its mask value.
-fn apply_mask<T: Pixel>(img: &mut Raster<T>, mask: &[f32]) {
-    for (p, &k) in img.data.iter_mut().zip(mask) {
-        let mut v = p.to_f32();
-        for c in &mut v[..3] {
-            *c *= k;
-        }
-        *p = T::from_f32(v);
-    }
+fn signal_mask(rig: &Rig, ch: &Channel, points: &[Option<DVec3>], gamma: f64) -> Result<Vec<f32>> {
+    signal_gains(&rig.blend_weights(ch, points), gamma).map_err(flag_error)
 }
 
 /// The content panorama as the scene renderers take it (8-bit, looked up exactly), projected
@@ -264,7 +250,7 @@ fn render_channel_on_wall(
     };
     let (mut img, report) = r.frame_map(&warp.map, &opts).map_err(flag_error)?;
     eprintln!("{}: cube faces at {}²", r.describe(), report.face);
-    apply_mask(&mut img, &signal_mask(&rig, ch, &warp.points, a.gamma));
+    apply_gains(&mut img, &signal_mask(&rig, ch, &warp.points, a.gamma)?)?;
     write_output(&a.out, AnyRaster::U8(img), &[])
 }
 

@@ -9,7 +9,9 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct ServeArgs {
-    /// Where the rig is kept (rig.json, written atomically). Without it nothing is persisted.
+    /// The directory that keeps the state: omniwarp.db (SQLite: the rig, every channel's
+    /// content canvas and tile screen, calibration proposals, the history of every edit),
+    /// meshes/ and the warp cache warps/. Without it nothing is persisted.
     #[arg(long)]
     data: Option<PathBuf>,
     /// Address and port to listen on. Anything but loopback needs --token-file.
@@ -37,8 +39,9 @@ pub struct ServeArgs {
     /// A directory mesh screens may be read from, besides the data directory's meshes/.
     #[arg(long)]
     assets: Option<PathBuf>,
-    /// When rig.json or a channel file and its .prev are both damaged, set them aside and start
-    /// again (from --demo for the rig) instead of refusing to start.
+    /// When the database is damaged, or no revision of a document in it passes validation,
+    /// keep it aside as omniwarp.db.damaged and start again (from --demo for the rig) instead
+    /// of refusing to start.
     #[arg(long)]
     reset: bool,
 }

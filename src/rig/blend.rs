@@ -11,6 +11,7 @@
 use super::{Channel, Rig};
 use crate::error::{Error, Result};
 use crate::image_io::atomic_write;
+use crate::raster::{Pixel, Raster};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::io::Write;
@@ -110,6 +111,49 @@ impl Rig {
             })
             .collect()
     }
+}
+
+/// The factor a projector's signal is multiplied by for blend weight `w` (linear light) on a
+/// projector of the given gamma: m = w^(1/γ). γ = 1 gives linear output (float renders that a
+/// later stage encodes).
+pub fn signal_gains(weights: &[f32], gamma: f64) -> Result<Vec<f32>> {
+    if !(gamma.is_finite() && gamma > 0.0) {
+        return Err(Error::invalid(
+            "gamma",
+            format!("must be positive, got {gamma}"),
+        ));
+    }
+    Ok(weights
+        .par_iter()
+        .map(|&w| f64::from(w).powf(1.0 / gamma) as f32)
+        .collect())
+}
+
+/// Applies a blend to a channel's rendered image: each pixel's colour (not its alpha) is
+/// multiplied by its gain from [`signal_gains`]. The image and the gains must be the channel's
+/// size, pixel for pixel.
+pub fn apply_gains<T: Pixel>(img: &mut Raster<T>, gains: &[f32]) -> Result<()> {
+    if gains.len() != img.data.len() {
+        return Err(Error::invalid(
+            "gains",
+            format!(
+                "{} values for a {}×{} image",
+                gains.len(),
+                img.width,
+                img.height
+            ),
+        ));
+    }
+    img.data
+        .par_iter_mut()
+        .zip(gains.par_iter())
+        // Outside the blend zones the gain is 1 and the pixel stays as it is.
+        .filter(|(_, m)| **m != 1.0)
+        .for_each(|(p, &m)| {
+            let v = p.to_f32();
+            *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
+        });
+    Ok(())
 }
 
 /// Writes blend weights as a grey PNG (16 or 8 bits) in signal space (m = w^(1/γ)).

@@ -10,7 +10,7 @@
 mod blend;
 mod warp;
 
-pub use blend::{BlendOptions, blend_png_bytes, write_blend_png};
+pub use blend::{BlendOptions, apply_gains, blend_png_bytes, signal_gains, write_blend_png};
 pub use warp::ChannelWarp;
 
 use crate::error::{Error, Result};

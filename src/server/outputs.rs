@@ -475,7 +475,7 @@ async fn render_scene(
             .render(&ask, (&id, key, k), &map, cancel)?;
         let weights = grid.values(&computed.geometry.weights);
         let f = computed.f.as_ref().map(|f| grid.values(f));
-        finish(&mut img, &weights, f.as_deref());
+        finish(&mut img, &weights, f.as_deref())?;
         Ok((png_bytes_with(&img, compression)?, said))
     })
     .await?;

@@ -9,38 +9,18 @@ use crate::normalmap::NormalMap;
 use crate::raster::{Pixel, Raster};
 use crate::render::coverage::{face_size_for, faces_sampled};
 use crate::render::{self, Filter, Plan, Warp};
+use crate::rig::{apply_gains, signal_gains};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
-/// The blend weights raised to 1/γ: what colour is multiplied by (γ = 1: linear output).
-fn gains(weights: &[f32], gamma: f64) -> Vec<f32> {
-    weights
-        .par_iter()
-        .map(|&k| f64::from(k).powf(1.0 / gamma) as f32)
-        .collect()
-}
-
-/// Multiplies each pixel's colour by its gain.
-fn apply_gains<T: Pixel>(img: &mut Raster<T>, gains: &[f32]) {
-    img.data
-        .par_iter_mut()
-        .zip(gains.par_iter())
-        // Outside the blend zones the gain is 1 (and the pixel stays as it is).
-        .filter(|(_, m)| **m != 1.0)
-        .for_each(|(p, &m)| {
-            let v = p.to_f32();
-            *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
-        });
-}
-
 /// A channel's picture made a preview: desaturated by the tiles' f and attenuated by the blend
 /// weights (raised to 1/2.2: PNG previews are in signal space).
-pub fn finish(img: &mut Raster<[u8; 4]>, weights: &[f32], f: Option<&[f32]>) {
+pub fn finish(img: &mut Raster<[u8; 4]>, weights: &[f32], f: Option<&[f32]>) -> crate::Result<()> {
     if let Some(f) = f {
         crate::tiles::raster::saturation(img, f);
     }
-    apply_gains(img, &gains(weights, 2.2));
+    apply_gains(img, &signal_gains(weights, 2.2)?)
 }
 
 /// The cube face size a preview uses unless asked for one: texels as fine as the preview's
@@ -239,7 +219,7 @@ impl Prepared {
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        apply_gains(&mut img, &self.gain);
+        apply_gains(&mut img, &self.gain)?;
         Ok(img)
     }
 }
@@ -309,7 +289,12 @@ impl Previews {
             face,
             filter: ask.filter,
         };
-        let gain = |c: &Computed| Arc::new(gains(&grid.values(&c.geometry.weights), 2.2));
+        let gain = |c: &Computed| -> crate::Result<Arc<Vec<f32>>> {
+            Ok(Arc::new(signal_gains(
+                &grid.values(&c.geometry.weights),
+                2.2,
+            )?))
+        };
         let f = match ask.scale {
             1 => None,
             _ => computed.f.as_ref().map(|f| grid.values(f)),
@@ -331,7 +316,7 @@ impl Previews {
                     let gain = if Arc::ptr_eq(&b.computed.geometry, &computed.geometry) {
                         b.gain.clone()
                     } else {
-                        gain(computed)
+                        gain(computed)?
                     };
                     Some((plan, b.cube.clone(), gain, Made::Rebuilt(rows)))
                 } else {
@@ -356,7 +341,7 @@ impl Previews {
                     1,
                     ask.filter,
                 )?;
-                (plan, cube, gain(computed), Made::Built)
+                (plan, cube, gain(computed)?, Made::Built)
             }
         };
         let prepared = Arc::new(Prepared {
@@ -403,7 +388,7 @@ impl Look {
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        apply_gains(&mut img, &gains(weights, gamma));
+        apply_gains(&mut img, &signal_gains(weights, gamma)?)?;
         Ok(img)
     }
 
@@ -420,7 +405,7 @@ impl Look {
         let size = (map.width() as u32, map.height() as u32);
         let source = crate::gpu::warp::Source::Map(map);
         let mut img = g.pass.render(&g.gpu, &tex, source, size, f, None)?;
-        apply_gains(&mut img, &gains(weights, 2.2));
+        apply_gains(&mut img, &signal_gains(weights, 2.2)?)?;
         Ok(img)
     }
 }

@@ -1,0 +1,13 @@
+//! The daemon: routes through `oneshot`, the real binary under load and SIGKILL, durability,
+//! history, hostile clients and the console's side.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod console;
+mod daemon;
+mod durability;
+mod history;
+mod hostile;
+mod server;
+mod server_edit;
