@@ -336,7 +336,7 @@ pub struct Chosen<const N: usize> {
 
 /// The coarsest grid (columns growing by about √2 per step, rows keeping the image's aspect)
 /// whose worst interpolation error, as `reading` says a reader reads it, is within `tolerance`;
-/// the exact grid ([`Layout::exact`]) when none is. Grids stop at [`crate::limits::EXPORT_NODES`]: the finest grid tried is returned, and
+/// the exact grid (`Layout::exact`) when none is. Grids stop at [`crate::limits::EXPORT_NODES`]: the finest grid tried is returned, and
 /// the caller compares its `max_error` with the tolerance. [`Error::Cancelled`] once `cancel`
 /// is set.
 ///

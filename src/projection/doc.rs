@@ -1,6 +1,6 @@
 //! A view as files and requests describe it: a projection by name with its parameters, and the
 //! view transform (look-to, look-up, off-axis vector, zoom). One type, [`ViewDoc`], for the
-//! fields every such document shares; [`view_document!`] declares a document that is those
+//! fields every such document shares; `view_document!` declares a document that is those
 //! fields plus its own (a tile screen's `source` adds the aspect it was sampled for, a content
 //! canvas its size), written flat as one JSON object with unknown fields refused.
 
@@ -44,7 +44,7 @@ impl ViewDoc {
     }
 
     /// The view for an output of height / width `aspect`. Errors name the parameter as the
-    /// library does (`hfov`, `look_to`); [`pointer`] turns that into the document's JSON pointer.
+    /// library does (`hfov`, `look_to`); [`pointer()`] turns that into the document's JSON pointer.
     pub fn view(&self, aspect: f64) -> Result<View> {
         let p = super::build(&self.projection, &self.params, aspect)?;
         let c = Orientation::look(

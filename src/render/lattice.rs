@@ -10,7 +10,7 @@
 //!
 //! Each cell earns interpolation by test: all 16 nodes of its stencil are covered and the
 //! interpolant agrees with the exact position at the cell's centre and edge midpoints to within
-//! [`ACCEPT`]. The centre is where the fourth-order error of a middle cell peaks, so a cell that
+//! `ACCEPT`. The centre is where the fourth-order error of a middle cell peaks, so a cell that
 //! passes with this margin holds [`BOUND`] everywhere; `tests/exactness.rs` measures every
 //! sample of a panel of views and contents against the exact positions. Cells that fail (seams
 //! between cube faces, the ±180° wrap of a panorama, poles, the edge of a fisheye's circle or of
@@ -20,7 +20,7 @@
 //! interpolated in directions, when the content says locating a direction is cheap and
 //! continuous but for seams it can point out ([`Locate::near_a_seam`]): the direction is
 //! interpolated from the same stencil, located sample by sample (a face choice and a division,
-//! no trigonometry), and recomputed exactly within [`SEAM_MARGIN`] of a seam. The same check
+//! no trigonometry), and recomputed exactly within `SEAM_MARGIN` of a seam. The same check
 //! admits such a cell, against the same exact positions.
 //!
 //! What must not move at all is exact too: coverage (a normal map's holes and a partial
@@ -309,7 +309,7 @@ impl<'a, L: Locate> Sampler<'a, L> {
     }
 
     /// How cell (cx, cy) is sampled: positions interpolated where they agree with the exact
-    /// ones at its centre and edge midpoints within [`ACCEPT`], else directions where the
+    /// ones at its centre and edge midpoints within `ACCEPT`, else directions where the
     /// content has seams and their located positions agree so, else exactly.
     fn classify(&self, cx: usize, cy: usize, rows: &[usize]) -> Cell {
         let (x0, x1) = (self.columns[cx], self.columns[cx + 1]);

@@ -323,7 +323,7 @@ impl Store {
         })
     }
 
-    /// Where mesh `name` is read from (see [`MeshDirs::path`]).
+    /// Where mesh `name` is read from (see `MeshDirs::path`).
     pub fn mesh_path(&self, name: &str) -> crate::Result<PathBuf> {
         self.meshes.path(name)
     }
@@ -368,8 +368,8 @@ impl Store {
         Some(entry.clone())
     }
 
-    /// Durably writes one of a channel's documents (`resource`, from [`content_resource`] or
-    /// [`tiles_resource`]) with its history row (blocking); `before` is the revision it
+    /// Durably writes one of a channel's documents (`resource`, from `content_resource` or
+    /// `tiles_resource`) with its history row (blocking); `before` is the revision it
     /// replaces, recorded first when the channel still had its defaults.
     pub fn save_doc(
         &self,

@@ -19,7 +19,7 @@ pub struct DecodeOptions {
     /// 16 px period; other periods scale it with theirs (it bounds the phase's noise, which
     /// is the same fraction of any period).
     pub max_sigma: f64,
-    /// Pixels dropped next to every undecoded one (see [`erode`]).
+    /// Pixels dropped next to every undecoded one (see `erode`).
     pub erode: u32,
 }
 

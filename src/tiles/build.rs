@@ -101,7 +101,7 @@ pub fn grid_of(
 
 /// Samples a projection into a columns × rows grid; features past a fisheye's image circle
 /// continue its formula and are marked `outside`, so the tiles along the circle still reach it
-/// and the projection's domain (the screen's mask, see [`TileScreen::covers`]) cuts them there.
+/// and the projection's domain (the screen's mask) cuts them there.
 pub fn from_source(source: &Source, columns: usize, rows: usize) -> Result<TileScreen> {
     let view = source.view()?;
     let mut t = grid_of(columns, rows, |s, t| {

@@ -48,7 +48,7 @@ pub struct BenchArgs {
 }
 
 pub fn run(mut a: BenchArgs) -> Result<()> {
-    // Without a projection: the README's case, a 270°×90° cylinder.
+    // Without a projection: the README's example, a 270°×90° cylinder.
     if a.projection.projection.is_none() {
         a.projection.projection = Some("cylindrical".into());
         a.projection.hfov = a.projection.hfov.or(Some(270.0));
