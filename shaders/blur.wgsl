@@ -1,6 +1,6 @@
 // Radial blur (seed 000, Figure 7): each pixel averages samples along the line towards the
 // image centre, the blur growing with the distance from it, as speed looks from a vehicle. CPU
-// twin, tap for tap: src/render/blur.rs.
+// twin, tap for tap: src/render/blur.rs. Prepended: fullscreen.wgsl.
 
 struct Blur {
     // strength (fraction of the distance to the centre covered), samples, width, height
@@ -10,13 +10,6 @@ struct Blur {
 @group(0) @binding(0) var<uniform> blur: Blur;
 @group(0) @binding(1) var image: texture_2d<f32>;
 @group(0) @binding(2) var image_sampler: sampler;
-
-@vertex
-fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    let x = f32(i32(i & 1u) * 4 - 1);
-    let y = f32(i32(i >> 1u) * 4 - 1);
-    return vec4<f32>(x, y, 0.0, 1.0);
-}
 
 @fragment
 fn fs_main(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {

@@ -4,7 +4,7 @@
 // map, src/scene/ppp.rs); the scissor rectangle clips it to its cell, and a cell cut into two
 // triangles keeps, per pixel, the half on its side of the diagonal. Shading is the cube-map
 // pass's (shaders/scene.wgsl). The CPU twin ray-casts each pixel along the piece's direction:
-// `RayCaster::picture` with `Pieces::ray` (src/scene/raycast.rs).
+// `RayCaster::picture` with `Pieces::ray` (src/scene/raycast.rs). Prepended: mesh.wgsl.
 
 struct Piece {
     clip: mat4x4<f32>,
@@ -18,25 +18,13 @@ struct Piece {
 
 @group(0) @binding(0) var<uniform> piece: Piece;
 
-struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) world: vec3<f32>,
-    @location(1) color: vec4<f32>,
-}
-
 @vertex
 fn vs_main(@location(0) position: vec3<f32>, @location(1) color: vec4<f32>) -> VertexOut {
-    var out: VertexOut;
-    out.clip = piece.clip * vec4<f32>(position, 1.0);
-    out.world = position;
-    out.color = color;
-    return out;
+    return mesh_vertex(piece.clip, position, color);
 }
 
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let n = normalize(cross(dpdx(in.world), dpdy(in.world)));
-    let light = 0.45 + 0.55 * abs(dot(n, piece.sun.xyz));
     // Pixel centres are at i + 0.5: doubled, they are odd integers, exactly.
     let p = vec2<i32>(in.clip.xy * 2.0);
     let g = piece.diagonal;
@@ -44,5 +32,5 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     if (piece.half.x == 1u && side <= 0) || (piece.half.x == 2u && side > 0) {
         discard;
     }
-    return vec4<f32>(in.color.rgb * light, 1.0);
+    return flat_shade(in, piece.sun.xyz);
 }

@@ -1,7 +1,8 @@
 // The warp pass: one full-screen triangle; each output pixel samples the cube map along its
 // sampling vector V, taken from the analytic projection (mode 0) or from the float normal map
 // (mode 1, textureLoad so it binds where Rgba32Float cannot be filtered), then the tile
-// screen's f lowers its saturation (seed 000, Figure 5). Prepended: projections.wgsl. The CPU
+// screen's f lowers its saturation (seed 000, Figure 5). Prepended: projections.wgsl and
+// fullscreen.wgsl. The CPU
 // twin is the reference renderer, src/render/mod.rs.
 
 struct Settings {
@@ -15,13 +16,6 @@ struct Settings {
 @group(0) @binding(3) var cube_sampler: sampler;
 @group(0) @binding(4) var normals: texture_2d<f32>;
 @group(0) @binding(5) var f_map: texture_2d<f32>;
-
-@vertex
-fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    let x = f32(i32(i & 1u) * 4 - 1);
-    let y = f32(i32(i >> 1u) * 4 - 1);
-    return vec4<f32>(x, y, 0.0, 1.0);
-}
 
 @fragment
 fn fs_main(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {

@@ -1,4 +1,4 @@
-"""Times OpenCV's cv2.remap with float maps on the bench's input, for scripts/bench-peers.
+"""Times OpenCV's cv2.remap with float maps on the bench's input, for calibration/bench/bench-peers.
 
 The maps send each pixel of a cylindrical view (270°×90° unless told) to the cube map in ffmpeg's c6x1
 layout (docs/conventions.md's directions and face table; ffmpeg's slots mirror our faces, see

@@ -1,5 +1,5 @@
 """One still through py360convert, timed as a whole process is: read the equirectangular PNG,
-project it to a perspective view, write the PNG. For scripts/bench-peers.
+project it to a perspective view, write the PNG. For calibration/bench/bench-peers.
 
 usage: py360_still.py IN.png WIDTH HEIGHT HFOV VFOV OUT.png
 """

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Regenerates calibration/fixtures/ffmpeg/: reference renders made by ffmpeg's v360 filter (the
-# Debian package), which tests/peer_ffmpeg.rs compares omniwarp's renders against. The input is
+# Debian package), which tests/core/peer_ffmpeg.rs compares omniwarp's renders against. The input is
 # omniwarp's smooth procedural pattern: band-limited, so that two correct bilinear resamplers
 # agree to well above 40 dB, and chiral, so that a mirrored face or axis shows.
 #

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates the single-channel reader fixtures in calibration/fixtures/interop/: what
 # OpenImageIO (ST-map EXR), OpenCV (2d PFM) and ffmpeg's `remap` filter (xmap/ymap PGM) show when
-# they read the centre channel's exports of the fixture rig, which tests/interop.rs compares
+# they read the centre channel's exports of the fixture rig, which tests/core/interop.rs compares
 # today's exports against. Everything comes from the registries: ffmpeg from Debian, OpenCV,
 # OpenImageIO, numpy and Pillow from PyPI.
 #

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Regenerates calibration/fixtures/interop/: what two real MPCDI readers show when they read the
-# packages omniwarp exports for them, which tests/interop.rs compares today's exports against.
+# packages omniwarp exports for them, which tests/core/interop.rs compares today's exports against.
 #
 #   PyMPCDI (github.com/drwrose/PyMPCDI, Python 2.7 + PyOpenGL), run unchanged under Xvfb and
 #     Mesa by pympcdi_run.py; it renders one region of a 2d package and saves the frame.

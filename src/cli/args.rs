@@ -328,7 +328,7 @@ impl BenchConditions {
         omniwarp::rig::Rig,
         omniwarp::rig::Channel,
         omniwarp::rig::Channel,
-        omniwarp::structured::bench::BenchOptions,
+        omniwarp::structured::simulator::SimulatorOptions,
     )> {
         use omniwarp::rig::Rig;
         let rig = Rig::read(&self.rig).with_context(|| format!("--rig {}", self.rig.display()))?;
@@ -341,7 +341,7 @@ impl BenchConditions {
         .clone();
         let camera = match &self.camera {
             Some(path) => read_camera(path)?,
-            None => omniwarp::structured::bench::fisheye_at_eye(
+            None => omniwarp::structured::simulator::fisheye_at_eye(
                 &rig,
                 &projector,
                 self.camera_size.0,
@@ -349,7 +349,7 @@ impl BenchConditions {
             )
             .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?,
         };
-        let opts = omniwarp::structured::bench::BenchOptions {
+        let opts = omniwarp::structured::simulator::SimulatorOptions {
             noise: self.noise,
             blur: self.blur,
             projector_gamma: self.gamma,

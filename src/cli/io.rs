@@ -197,6 +197,7 @@ pub fn print_report(prefix: &str, r: &Report) -> Result<()> {
 }
 
 /// The median wall time of `frames` calls of `f`, milliseconds (benchmarks).
+#[cfg(feature = "bench")]
 pub fn median_ms(frames: u16, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     let mut t = Vec::new();
     for _ in 0..frames.max(1) {

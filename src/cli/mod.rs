@@ -33,6 +33,7 @@ mod tiles;
 mod warp;
 
 use clap::{Parser, Subcommand};
+#[cfg(feature = "bench")]
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -94,15 +95,19 @@ enum Command {
     #[command(subcommand)]
     Bench(bench::BenchCommand),
     // The benchmarks' names before they were gathered under `bench`, kept for old scripts.
+    #[cfg(feature = "bench")]
     #[command(hide = true)]
     WarpBench {
         #[arg(long, default_value = bench::rig::DOME_RIG)]
         rig: PathBuf,
     },
+    #[cfg(feature = "bench")]
     #[command(hide = true)]
     GpuBench(bench::gpu::GpuBenchArgs),
+    #[cfg(feature = "bench")]
     #[command(hide = true)]
     ServeBench(bench::serve::ServeBenchArgs),
+    #[cfg(feature = "bench")]
     #[command(hide = true)]
     CalibrateBench,
 }
@@ -125,9 +130,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Measure(a) => measure::run(a),
         Command::Scene(a) => scene::export(a),
         Command::Bench(c) => bench::run(c),
+        #[cfg(feature = "bench")]
         Command::WarpBench { rig } => bench::rig::run(&rig),
+        #[cfg(feature = "bench")]
         Command::GpuBench(a) => bench::gpu::run(a),
+        #[cfg(feature = "bench")]
         Command::ServeBench(a) => bench::serve::run(a),
+        #[cfg(feature = "bench")]
         Command::CalibrateBench => bench::calibrate::run(),
     }
 }

@@ -6,8 +6,8 @@ use anyhow::Result;
 use clap::Args;
 use omniwarp::image_io::{Precision, atomic_write, create_dir_durably, write_exr_rgba};
 use omniwarp::raster::Raster;
-use omniwarp::structured::bench::Bench;
 use omniwarp::structured::read_images;
+use omniwarp::structured::simulator::Simulator;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -22,15 +22,15 @@ pub struct SimulateArgs {
     out: PathBuf,
     /// Film these projector images instead of the sequence (every PNG or JPEG of the folder in
     /// name order, each of the projector's size): another structured-light code through the
-    /// same bench, as `calibration/peers/opencv_graycode.py` does with OpenCV's.
+    /// same bench, as `calibration/bench/opencv_graycode.py` does with OpenCV's.
     #[arg(long, value_name = "DIR")]
     patterns: Option<PathBuf>,
 }
 
 pub fn run(a: SimulateArgs) -> Result<()> {
     let (rig, projector, camera, opts) = a.conditions.setup()?;
-    let bench =
-        Bench::new(&rig, &projector, &camera, opts).map_err(|e| anyhow::anyhow!("{}", named(e)))?;
+    let bench = Simulator::new(&rig, &projector, &camera, opts)
+        .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     create_dir_durably(&a.out)?;
     let write = |name: String, bytes: &[u8]| -> Result<()> {
         let path = a.out.join(name);

@@ -22,15 +22,48 @@ pub mod warp;
 
 use crate::error::{Error, Result};
 
+// WGSL has no includes: a pass's module is its own file with the shared ones it names in its
+// header ("Prepended: …") put before it.
+/// The projections in WGSL, twin of `src/projection/`.
 pub const PROJECTIONS_WGSL: &str = include_str!("../../shaders/projections.wgsl");
-pub const WARP_WGSL: &str = include_str!("../../shaders/warp.wgsl");
-pub const SCENE_WGSL: &str = include_str!("../../shaders/scene.wgsl");
-pub const BLUR_WGSL: &str = include_str!("../../shaders/blur.wgsl");
-pub const PPP_WGSL: &str = include_str!("../../shaders/ppp.wgsl");
+/// The warp pass (the projections are prepended at run time, see [`warp_source`]).
+pub const WARP_WGSL: &str = concat!(
+    include_str!("../../shaders/fullscreen.wgsl"),
+    "\n",
+    include_str!("../../shaders/warp.wgsl")
+);
+/// The cube-map scene pass and the projected panoramas.
+pub const SCENE_WGSL: &str = concat!(
+    include_str!("../../shaders/mesh.wgsl"),
+    "\n",
+    include_str!("../../shaders/scene.wgsl")
+);
+/// The radial blur.
+pub const BLUR_WGSL: &str = concat!(
+    include_str!("../../shaders/fullscreen.wgsl"),
+    "\n",
+    include_str!("../../shaders/blur.wgsl")
+);
+/// Piecewise perspective projection.
+pub const PPP_WGSL: &str = concat!(
+    include_str!("../../shaders/mesh.wgsl"),
+    "\n",
+    include_str!("../../shaders/ppp.wgsl")
+);
 
 /// The warp shader as compiled: the projections prepended.
 pub fn warp_source() -> String {
     format!("{PROJECTIONS_WGSL}\n{WARP_WGSL}")
+}
+
+/// Every shader module as the renderers compile it, by name (for validation).
+pub fn shader_modules() -> [(&'static str, String); 4] {
+    [
+        ("warp", warp_source()),
+        ("scene", SCENE_WGSL.to_string()),
+        ("blur", BLUR_WGSL.to_string()),
+        ("ppp", PPP_WGSL.to_string()),
+    ]
 }
 
 /// A device and its queue, with what was chosen.

@@ -11,7 +11,7 @@
 //! Each cell earns interpolation by test: all 16 nodes of its stencil are covered and the
 //! interpolant agrees with the exact position at the cell's centre and edge midpoints to within
 //! `ACCEPT`. The centre is where the fourth-order error of a middle cell peaks, so a cell that
-//! passes with this margin holds [`BOUND`] everywhere; `tests/exactness.rs` measures every
+//! passes with this margin holds [`BOUND`] everywhere; `tests/core/exactness.rs` measures every
 //! sample of a panel of views and contents against the exact positions. Cells that fail (seams
 //! between cube faces, the ±180° wrap of a panorama, poles, the edge of a fisheye's circle or of
 //! a partial panorama, kinks in an edited normal map) are computed exactly, sample by sample.

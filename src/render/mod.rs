@@ -5,7 +5,8 @@
 //! atlas position), then [`Plan::render`] filters any number of frames of content through it.
 //! The per-frame step reads 8 bytes of plan and 4 texels per output pixel, with integer
 //! arithmetic for 8-bit bilinear output, and runs on all cores (rayon, one task per row). The
-//! GPU's twin is the warp pass, `shaders/warp.wgsl`, held to this path by `tests/gpu.rs`.
+//! GPU's twin is the warp pass, `shaders/warp.wgsl` (drawn as the full-screen triangle of
+//! `shaders/fullscreen.wgsl`), held to this path by `tests/gpu/gpu.rs`.
 
 pub mod blur;
 pub mod coverage;

@@ -8,9 +8,11 @@
 //! y down, z forward.
 
 mod blend;
+mod tiles;
 mod warp;
 
 pub use blend::{BlendOptions, apply_gains, blend_png_bytes, signal_gains, write_blend_png};
+pub use tiles::{SAMPLED_COLUMNS, default_rows};
 pub use warp::ChannelWarp;
 
 use crate::error::{Error, Result};

@@ -49,7 +49,7 @@ impl RayCaster {
     }
 
     /// What the eye sees along `d`: the first triangle met, shaded as `shaders/scene.wgsl`
-    /// and `shaders/ppp.wgsl` shade it, else the sky.
+    /// and `shaders/ppp.wgsl` shade it (`flat_shade` in `shaders/mesh.wgsl`), else the sky.
     pub fn shade(&self, eye: DVec3, d: DVec3) -> [u8; 4] {
         match self.mesh.first_hit(eye, d) {
             None => SKY,

@@ -4,35 +4,22 @@
 //! server listens beyond loopback. Every route is in one table (the `routes!` call below), from which both the router and
 //! [`ROUTES`] are made; `api/openapi.yaml` documents the same routes (a test checks).
 
-mod cache;
-mod calib;
-mod canvas;
-mod captures;
-mod channels;
 pub mod client;
-mod console;
-pub mod db;
-mod error;
-mod exports;
-mod geometry;
-mod guard;
-mod history;
-mod jobs;
-mod keep;
-mod meshes;
-mod outputs;
-mod preview;
-mod rig;
-mod scenes;
-mod show;
-mod state;
-mod store;
+mod http;
+mod previews;
+mod routes;
+pub mod storage;
 
-pub use canvas::Canvas;
-pub use error::ApiError;
-pub use guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
-pub use state::{AppState, MAX_BODY, Options, STREAMS, WORKERS};
-pub use store::{ChannelData, OpenOptions, Store};
+use http::guard;
+use routes::{
+    calib, captures, channels, console, exports, geometry, history, meshes, outputs, rig, show,
+};
+
+pub use http::error::ApiError;
+pub use http::guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
+pub use http::state::{AppState, MAX_BODY, Options, STREAMS, WORKERS};
+pub use storage::canvas::Canvas;
+pub use storage::store::{ChannelData, OpenOptions, Store};
 
 use axum::Router;
 use axum::extract::{Request, State};

@@ -34,9 +34,9 @@
 //! serves): white, black, then for x and then y: the Gray bits from the most significant, each
 //! as (pattern, inverse), then the phase steps. [`PatternSet::frames`] names every frame.
 
-pub mod bench;
 pub mod decode;
 mod fit;
+pub mod simulator;
 pub mod triangulate;
 
 pub use fit::{

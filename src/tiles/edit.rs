@@ -109,9 +109,7 @@ fn midpoint(a: &Feature, b: &Feature) -> Feature {
 impl TileScreen {
     /// Applies `edit`, returning the new screen (revision + 1) or why it was refused.
     pub fn edit(&self, edit: &Edit) -> Result<TileScreen> {
-        let mut next = self.clone();
-        next.revision = self.revision + 1;
-        match edit {
+        let layout = match edit {
             Edit::SetFeature {
                 column,
                 row,
@@ -119,198 +117,34 @@ impl TileScreen {
                 theta,
                 scale,
                 f,
-            } => {
-                let (c, r, _) = grid_parts(self)?;
-                let (k, l) = (index_in("column", *column, c)?, index_in("row", *row, r)?);
-                let Layout::Grid { features, .. } = &mut next.layout else {
-                    unreachable!()
-                };
-                let feat = &mut features[l * c + k];
-                if let Some(v) = phi {
-                    feat.phi = *v;
-                }
-                if let Some(v) = theta {
-                    feat.theta = *v;
-                }
-                if let Some(v) = scale {
-                    feat.scale = *v;
-                }
-                if let Some(v) = f {
-                    feat.f = *v;
-                }
-            }
+            } => self.set_feature((*column, *row), [*phi, *theta, *scale, *f])?,
             Edit::SetRegion {
                 columns,
                 rows,
                 source,
-            } => {
-                let view = source.view()?;
-                let (c, r, _) = grid_parts(self)?;
-                let (k0, k1) = (
-                    index_in("columns", columns.0, c)?,
-                    index_in("columns", columns.1, c)?,
-                );
-                let (l0, l1) = (index_in("rows", rows.0, r)?, index_in("rows", rows.1, r)?);
-                if k0 >= k1 || l0 >= l1 {
-                    return Err(Error::invalid(
-                        "columns",
-                        "a region needs at least one tile",
-                    ));
-                }
-                let Layout::Grid { features, .. } = &mut next.layout else {
-                    unreachable!()
-                };
-                let region = grid_of(k1 - k0 + 1, l1 - l0 + 1, |s, t| {
-                    (view.direction(s, t).ok(), 1.0)
-                })?;
-                let Layout::Grid {
-                    features: fresh, ..
-                } = region.layout
-                else {
-                    unreachable!()
-                };
-                for l in l0..=l1 {
-                    for k in k0..=k1 {
-                        let src = fresh[(l - l0) * (k1 - k0 + 1) + (k - k0)];
-                        let dst = &mut features[l * c + k];
-                        // Keep the screen positions and where the source's edge is; only what
-                        // is seen there changes.
-                        let (x, y, f, outside) = (dst.x, dst.y, dst.f, dst.outside);
-                        *dst = Feature {
-                            x,
-                            y,
-                            f,
-                            outside,
-                            ..src
-                        };
-                    }
-                }
-            }
-            Edit::InsertRow { at } | Edit::InsertColumn { at } => {
-                let (c, r, f) = grid_parts(self)?;
-                let row = matches!(edit, Edit::InsertRow { .. });
-                let n = if row { r } else { c };
-                if *at == 0 || *at >= n {
-                    return Err(Error::invalid(
-                        "at",
-                        format!("must lie in 1..{}, got {at}", n - 1),
-                    ));
-                }
-                let mut out = Vec::with_capacity(f.len() + if row { c } else { r });
-                for l in 0..r {
-                    if row && l == *at {
-                        out.extend((0..c).map(|k| midpoint(&f[(l - 1) * c + k], &f[l * c + k])));
-                    }
-                    for k in 0..c {
-                        if !row && k == *at {
-                            out.push(midpoint(&f[l * c + k - 1], &f[l * c + k]));
-                        }
-                        out.push(f[l * c + k]);
-                    }
-                }
-                let (c, r) = if row { (c, r + 1) } else { (c + 1, r) };
-                next.layout = Layout::Grid {
-                    columns: c,
-                    rows: r,
-                    features: out,
-                };
-            }
-            Edit::RemoveRow { at } | Edit::RemoveColumn { at } => {
-                let (c, r, f) = grid_parts(self)?;
-                let row = matches!(edit, Edit::RemoveRow { .. });
-                let n = if row { r } else { c };
-                index_in("at", *at, n)?;
-                if n <= 2 {
-                    return Err(Error::invalid(
-                        "at",
-                        "a grid keeps at least 2 rows and 2 columns",
-                    ));
-                }
-                let out: Vec<Feature> = f
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| if row { i / c != *at } else { i % c != *at })
-                    .map(|(_, v)| *v)
-                    .collect();
-                let (c, r) = if row { (c, r - 1) } else { (c - 1, r) };
-                next.layout = Layout::Grid {
-                    columns: c,
-                    rows: r,
-                    features: out,
-                };
-            }
-            Edit::Smooth { iterations } => {
-                crate::limits::at_most(
-                    "iterations",
-                    *iterations,
-                    crate::limits::SMOOTH_ITERATIONS,
-                )?;
-                let (c, r, _) = grid_parts(self)?;
-                let Layout::Grid { features, .. } = &mut next.layout else {
-                    unreachable!()
-                };
-                for _ in 0..*iterations {
-                    let before = features.clone();
-                    for l in 1..r - 1 {
-                        for k in 1..c - 1 {
-                            let me = before[l * c + k];
-                            let n = [
-                                before[l * c + k - 1],
-                                before[l * c + k + 1],
-                                before[(l - 1) * c + k],
-                                before[(l + 1) * c + k],
-                            ];
-                            // Invalid features hold no direction (φ = θ = 0) and outside ones an
-                            // extrapolated one; a feature beside either is the wall's edge. All
-                            // stay where they are, so the edge does not drift inwards.
-                            let held = |f: &Feature| !f.valid || f.outside;
-                            if held(&me) || n.iter().any(held) {
-                                continue;
-                            }
-                            let mean = |g: fn(&Feature) -> f64| n.iter().map(g).sum::<f64>() / 4.0;
-                            let phi =
-                                n.iter().map(|v| unwrap_deg(v.phi, me.phi)).sum::<f64>() / 4.0;
-                            let f = &mut features[l * c + k];
-                            f.phi = phi;
-                            f.theta = mean(|v| v.theta);
-                            f.scale = mean(|v| v.scale);
-                            f.f = mean(|v| v.f);
-                        }
-                    }
-                }
-            }
+            } => self.set_region(*columns, *rows, source)?,
+            Edit::InsertRow { at } => self.insert(Line::Row, *at)?,
+            Edit::InsertColumn { at } => self.insert(Line::Column, *at)?,
+            Edit::RemoveRow { at } => self.remove(Line::Row, *at)?,
+            Edit::RemoveColumn { at } => self.remove(Line::Column, *at)?,
+            Edit::Smooth { iterations } => self.smooth(*iterations)?,
             Edit::Subdivide { columns, rows } => {
-                next.layout = super::refine::subdivide(self, *columns, *rows)?.layout;
+                super::refine::subdivide(self, *columns, *rows)?.layout
             }
             Edit::Coarsen { tolerance } => {
-                let tol = tolerance.unwrap_or(REFINE_TOLERANCE);
-                next.layout = super::refine::coarsen(self, tol)?.layout;
+                super::refine::coarsen(self, tolerance.unwrap_or(REFINE_TOLERANCE))?.layout
             }
             Edit::Refine {
                 tolerance,
                 max_features,
-            } => {
-                let view = self
-                    .source
-                    .as_ref()
-                    .ok_or_else(|| {
-                        Error::invalid("tiles", "has no source projection to refine towards")
-                    })?
-                    .view()?;
-                // Past a fisheye's circle its formula goes on, as the screen's features do.
-                let exact =
-                    |x: f64, y: f64| view.direction_unbounded(2.0 * x - 1.0, 1.0 - 2.0 * y).ok();
-                next.layout = self.refined(*tolerance, *max_features, &exact)?.layout;
-            }
-            Edit::Reset => {
-                let (c, r, _) = grid_parts(self)?;
-                let source = self.source.as_ref().ok_or_else(|| {
-                    Error::invalid("tiles", "has no source projection to reset to")
-                })?;
-                let fresh = from_source(source, c, r)?;
-                next.layout = fresh.layout;
-            }
-        }
+            } => self.refine_to_source(*tolerance, *max_features)?,
+            Edit::Reset => self.reset()?,
+        };
+        let next = TileScreen {
+            layout,
+            revision: self.revision + 1,
+            ..self.clone()
+        };
         next.validate()?;
         // Edits that move features can fold the content over while the screen positions stay
         // put; insertions take midpoints and a reset resamples, which cannot.
@@ -321,6 +155,200 @@ impl TileScreen {
             refuse_content_folds(self, &next, edit)?;
         }
         Ok(next)
+    }
+
+    /// The grid with feature (column, row)'s φ, θ, scale and f set where given.
+    fn set_feature(
+        &self,
+        (column, row): (usize, usize),
+        values: [Option<f64>; 4],
+    ) -> Result<Layout> {
+        let (c, r, f) = grid_parts(self)?;
+        let (k, l) = (index_in("column", column, c)?, index_in("row", row, r)?);
+        let mut features = f.to_vec();
+        let feat = &mut features[l * c + k];
+        let [phi, theta, scale, f] = values;
+        feat.phi = phi.unwrap_or(feat.phi);
+        feat.theta = theta.unwrap_or(feat.theta);
+        feat.scale = scale.unwrap_or(feat.scale);
+        feat.f = f.unwrap_or(feat.f);
+        Ok(grid_layout(c, r, features))
+    }
+
+    /// The grid with columns k0..=k1, rows l0..=l1 seeing what `source` sees, spread over them.
+    fn set_region(
+        &self,
+        columns: (usize, usize),
+        rows: (usize, usize),
+        source: &Source,
+    ) -> Result<Layout> {
+        let view = source.view()?;
+        let (c, r, f) = grid_parts(self)?;
+        let (k0, k1) = (
+            index_in("columns", columns.0, c)?,
+            index_in("columns", columns.1, c)?,
+        );
+        let (l0, l1) = (index_in("rows", rows.0, r)?, index_in("rows", rows.1, r)?);
+        if k0 >= k1 || l0 >= l1 {
+            return Err(Error::invalid(
+                "columns",
+                "a region needs at least one tile",
+            ));
+        }
+        let region = grid_of(k1 - k0 + 1, l1 - l0 + 1, |s, t| {
+            (view.direction(s, t).ok(), 1.0)
+        })?;
+        let Layout::Grid {
+            features: fresh, ..
+        } = region.layout
+        else {
+            unreachable!("grid_of makes grids")
+        };
+        let mut features = f.to_vec();
+        for l in l0..=l1 {
+            for k in k0..=k1 {
+                let src = fresh[(l - l0) * (k1 - k0 + 1) + (k - k0)];
+                let dst = &mut features[l * c + k];
+                // Keep the screen positions and where the source's edge is; only what is seen
+                // there changes.
+                let (x, y, f, outside) = (dst.x, dst.y, dst.f, dst.outside);
+                *dst = Feature {
+                    x,
+                    y,
+                    f,
+                    outside,
+                    ..src
+                };
+            }
+        }
+        Ok(grid_layout(c, r, features))
+    }
+
+    /// The grid with a row or column of midpoints inserted before row or column `at`.
+    fn insert(&self, line: Line, at: usize) -> Result<Layout> {
+        let (c, r, f) = grid_parts(self)?;
+        let row = line == Line::Row;
+        let n = if row { r } else { c };
+        if at == 0 || at >= n {
+            return Err(Error::invalid(
+                "at",
+                format!("must lie in 1..{}, got {at}", n - 1),
+            ));
+        }
+        let mut out = Vec::with_capacity(f.len() + if row { c } else { r });
+        for l in 0..r {
+            if row && l == at {
+                out.extend((0..c).map(|k| midpoint(&f[(l - 1) * c + k], &f[l * c + k])));
+            }
+            for k in 0..c {
+                if !row && k == at {
+                    out.push(midpoint(&f[l * c + k - 1], &f[l * c + k]));
+                }
+                out.push(f[l * c + k]);
+            }
+        }
+        let (c, r) = if row { (c, r + 1) } else { (c + 1, r) };
+        Ok(grid_layout(c, r, out))
+    }
+
+    /// The grid without row or column `at`.
+    fn remove(&self, line: Line, at: usize) -> Result<Layout> {
+        let (c, r, f) = grid_parts(self)?;
+        let row = line == Line::Row;
+        let n = if row { r } else { c };
+        index_in("at", at, n)?;
+        if n <= 2 {
+            return Err(Error::invalid(
+                "at",
+                "a grid keeps at least 2 rows and 2 columns",
+            ));
+        }
+        let out: Vec<Feature> = f
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| if row { i / c != at } else { i % c != at })
+            .map(|(_, v)| *v)
+            .collect();
+        let (c, r) = if row { (c, r - 1) } else { (c - 1, r) };
+        Ok(grid_layout(c, r, out))
+    }
+
+    /// The grid with every inner feature replaced by the mean of its four neighbours,
+    /// `iterations` times.
+    fn smooth(&self, iterations: usize) -> Result<Layout> {
+        crate::limits::at_most("iterations", iterations, crate::limits::SMOOTH_ITERATIONS)?;
+        let (c, r, f) = grid_parts(self)?;
+        let mut features = f.to_vec();
+        for _ in 0..iterations {
+            let before = features.clone();
+            for l in 1..r - 1 {
+                for k in 1..c - 1 {
+                    let me = before[l * c + k];
+                    let n = [
+                        before[l * c + k - 1],
+                        before[l * c + k + 1],
+                        before[(l - 1) * c + k],
+                        before[(l + 1) * c + k],
+                    ];
+                    // Invalid features hold no direction (φ = θ = 0) and outside ones an
+                    // extrapolated one; a feature beside either is the wall's edge. All stay
+                    // where they are, so the edge does not drift inwards.
+                    let held = |f: &Feature| !f.valid || f.outside;
+                    if held(&me) || n.iter().any(held) {
+                        continue;
+                    }
+                    let mean = |g: fn(&Feature) -> f64| n.iter().map(g).sum::<f64>() / 4.0;
+                    let phi = n.iter().map(|v| unwrap_deg(v.phi, me.phi)).sum::<f64>() / 4.0;
+                    let f = &mut features[l * c + k];
+                    f.phi = phi;
+                    f.theta = mean(|v| v.theta);
+                    f.scale = mean(|v| v.scale);
+                    f.f = mean(|v| v.f);
+                }
+            }
+        }
+        Ok(grid_layout(c, r, features))
+    }
+
+    /// [`Edit::Refine`] towards the projection the screen was sampled from.
+    fn refine_to_source(
+        &self,
+        tolerance: Option<f64>,
+        max_features: Option<usize>,
+    ) -> Result<Layout> {
+        let view = self
+            .source
+            .as_ref()
+            .ok_or_else(|| Error::invalid("tiles", "has no source projection to refine towards"))?
+            .view()?;
+        // Past a fisheye's circle its formula goes on, as the screen's features do.
+        let exact = |x: f64, y: f64| view.direction_unbounded(2.0 * x - 1.0, 1.0 - 2.0 * y).ok();
+        Ok(self.refined(tolerance, max_features, &exact)?.layout)
+    }
+
+    /// The grid sampled afresh from the screen's source projection, at its current size.
+    fn reset(&self) -> Result<Layout> {
+        let (c, r, _) = grid_parts(self)?;
+        let source = self
+            .source
+            .as_ref()
+            .ok_or_else(|| Error::invalid("tiles", "has no source projection to reset to"))?;
+        Ok(from_source(source, c, r)?.layout)
+    }
+}
+
+/// Which kind of grid line an insertion or removal is about.
+#[derive(Clone, Copy, PartialEq)]
+enum Line {
+    Row,
+    Column,
+}
+
+fn grid_layout(columns: usize, rows: usize, features: Vec<Feature>) -> Layout {
+    Layout::Grid {
+        columns,
+        rows,
+        features,
     }
 }
 

@@ -8,7 +8,7 @@
 //! (angles are interpolated linearly; directions as weighted vectors, and a new feature keeps
 //! the length of the interpolated vector as its `weight`), and outside it a new column only
 //! re-splits old quads along another diagonal, which moves the warp by the quad's twist —
-//! `tests/tiles.rs` measures both against 0.01°.
+//! `tests/core/tiles.rs` measures both against 0.01°.
 
 use super::raster::{angles, f_normal, unwrap_deg};
 use super::{Feature, Interpolation, Layout, TileScreen};

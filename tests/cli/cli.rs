@@ -190,219 +190,32 @@ fn render_normal_map_and_cube_layouts_work_end_to_end() {
 #[test]
 fn bad_input_names_the_flag_and_leaves_no_file() {
     let s = Scene::new();
-    let cases: &[(&[&str], &str)] = &[
-        (
-            &["--projection", "flat", "--hfov", "400", "--size", "8x8"],
-            "--hfov",
-        ),
-        (
-            &["--projection", "flat", "--hfov", "nan", "--size", "8x8"],
-            "--hfov",
-        ),
-        (&["--projection", "flat", "--size", "8x8"], "--hfov"),
-        (
-            &[
-                "--projection",
-                "warp-drive",
-                "--hfov",
-                "90",
-                "--size",
-                "8x8",
-            ],
-            "--projection",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--tilt",
-                "5",
-                "--size",
-                "8x8",
-            ],
-            "--tilt",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--look-to",
-                "0,1,0",
-                "--look-up",
-                "0,2,0",
-                "--size",
-                "8x8",
-            ],
-            "--look-up",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--look-to",
-                "0,0,0",
-                "--size",
-                "8x8",
-            ],
-            "--look-to",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--offaxis",
-                "1,0,0",
-                "--size",
-                "8x8",
-            ],
-            "--offaxis",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--zoom",
-                "-1",
-                "--size",
-                "8x8",
-            ],
-            "--zoom",
-        ),
-        (
-            &["--projection", "flat", "--hfov", "90", "--size", "0x8"],
-            "--size",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--size",
-                "8x8",
-                "--supersample",
-                "40",
-            ],
-            "--supersample",
-        ),
-        (
-            &[
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--size",
-                "8x8",
-                "--content-hfov",
-                "400",
-            ],
-            "--content-hfov",
-        ),
-    ];
-    for (args, flag) in cases {
-        let mut full = render(args);
-        full.extend(["--out".to_string(), "bad.png".to_string()]);
-        let (ok, err) = s.run(&strs(&full));
-        assert!(!ok, "{args:?} succeeded");
-        assert!(err.contains(flag), "{args:?}: `{err}` does not name {flag}");
-        assert!(!s.path("bad.png").exists(), "{args:?} left bad.png behind");
+    let table = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cli/refusals.txt"),
+    )
+    .unwrap();
+    let mut cases = 0;
+    for line in table
+        .lines()
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+    {
+        let (args, said) = line
+            .split_once(" | ")
+            .expect("`arguments | words` on every line");
+        let args: Vec<&str> = args.split_whitespace().collect();
+        let (ok, err) = s.run(&args);
+        assert!(!ok, "{line}: succeeded");
+        for word in said.split_whitespace() {
+            assert!(err.contains(word), "{line}: `{err}` does not say {word}");
+        }
+        let names: Vec<_> = std::fs::read_dir(s.dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["eq.png"], "{line}: files left behind");
+        cases += 1;
     }
-    let whole: &[(&[&str], &[&str])] = &[
-        (
-            &[
-                "render",
-                "--content",
-                "missing.png",
-                "--content-format",
-                "equirect",
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--size",
-                "8x8",
-                "--out",
-                "x.png",
-            ],
-            &["--content", "missing.png"],
-        ),
-        (
-            &[
-                "render",
-                "--content",
-                "eq.png",
-                "--content-format",
-                "cubemap",
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--size",
-                "8x8",
-                "--out",
-                "x.png",
-            ],
-            &["--content", "6·N"],
-        ),
-        (
-            &[
-                "render",
-                "--content",
-                "eq.png",
-                "--content-format",
-                "equirect",
-                "--projection",
-                "flat",
-                "--hfov",
-                "90",
-                "--size",
-                "8x8",
-                "--out",
-                "x.jpg",
-            ],
-            &["--out"],
-        ),
-        (
-            &[
-                "render",
-                "--content",
-                "eq.png",
-                "--content-format",
-                "equirect",
-                "--normal-map",
-                "eq.png",
-                "--out",
-                "x.png",
-            ],
-            &["--normal-map"],
-        ),
-    ];
-    for (args, said) in whole {
-        let (ok, err) = s.run(args);
-        assert!(
-            !ok && said.iter().all(|w| err.contains(w)),
-            "{args:?}: {err}"
-        );
-    }
-    let names: Vec<_> = std::fs::read_dir(s.dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name())
-        .collect();
-    assert_eq!(
-        names,
-        vec![std::ffi::OsString::from("eq.png")],
-        "files left behind"
-    );
+    assert!(cases >= 16, "only {cases} refusals read");
 }
 
 #[test]

@@ -22,7 +22,7 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// `src/server/jobs.rs` → ["server", "jobs"]; `src/raster/mod.rs` → ["raster"].
+/// `src/server/http/jobs.rs` → ["server", "http", "jobs"]; `src/raster/mod.rs` → ["raster"].
 fn module_of(file: &Path) -> Vec<String> {
     let rel = file.strip_prefix(root().join("src")).unwrap();
     let mut parts: Vec<String> = rel
@@ -250,7 +250,10 @@ fn no_module_imports_one_that_imports_it_back() {
     let graphs = sibling_edges(&t, false);
     // The parser must see the edges that exist, or this test could never fail.
     assert!(graphs[""]["render"].contains("raster"), "{graphs:?}");
-    assert!(graphs["server"]["jobs"].contains("state"), "{graphs:?}");
+    assert!(
+        graphs["server::http"]["jobs"].contains("state"),
+        "{graphs:?}"
+    );
     for (parent, edges) in graphs.iter().chain(&sibling_edges(&t, true)) {
         if let Some(c) = cycle(edges) {
             panic!("module cycle under `{parent}`: {}", c.join(" → "));
@@ -328,6 +331,8 @@ fn every_shader_and_its_cpu_twin_name_each_other() {
         ),
         ("shaders/warp.wgsl", &["src/render/mod.rs"]),
         ("shaders/blur.wgsl", &["src/render/blur.rs"]),
+        ("shaders/mesh.wgsl", &["src/scene/raycast.rs"]),
+        ("shaders/fullscreen.wgsl", &["src/render/mod.rs"]),
     ];
     let mut listed: Vec<&str> = twins.iter().map(|(s, _)| *s).collect();
     let mut present: Vec<String> = std::fs::read_dir(root().join("shaders"))
@@ -381,6 +386,115 @@ fn every_document_the_code_cites_is_in_the_repository() {
         }
     }
     assert!(cited > 0, "the scan found no citation at all");
+}
+
+/// Text files of the tree under `dir` (recursively; fixtures and generated folders left out).
+fn text_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy();
+        if p.is_dir() {
+            if !["fixtures", "node_modules", "charts"].contains(&name.as_ref()) {
+                text_files(&p, out);
+            }
+        } else if std::fs::read_to_string(&p).is_ok() {
+            out.push(p);
+        }
+    }
+}
+
+/// The repository paths a text names (`src/…`, `tests/…`, `calibration/…` and the other top-level
+/// folders, ending in a file name with an extension), with the line each is on.
+fn named_paths(text: &str) -> Vec<(usize, &str)> {
+    const TOP: [&str; 9] = [
+        "src/",
+        "tests/",
+        "docs/",
+        "calibration/",
+        "scripts/",
+        "shaders/",
+        "examples/",
+        "api/",
+        "console/",
+    ];
+    let in_path = |c: char| c.is_ascii_alphanumeric() || "_./-".contains(c);
+    let mut found = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        for top in TOP {
+            for (i, _) in line.match_indices(top) {
+                if line[..i].chars().next_back().is_some_and(in_path) {
+                    continue;
+                }
+                let len = line[i..]
+                    .find(|c: char| !in_path(c))
+                    .unwrap_or(line.len() - i);
+                let path = line[i..i + len].trim_end_matches('.');
+                let file = path.rsplit('/').next().unwrap();
+                let has_extension = file.rsplit_once('.').is_some_and(|(stem, ext)| {
+                    !stem.is_empty()
+                        && (1..=5).contains(&ext.len())
+                        && ext.chars().all(|c| c.is_ascii_lowercase())
+                });
+                if has_extension {
+                    found.push((n + 1, path));
+                }
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_path_scanner_finds_paths_and_only_paths() {
+    let text = "see tests/core/lens.rs, and src/cli/bench/.\n\
+                `calibration/bench/bench-peers` (a script); docs/limits.md.\n\
+                my-src/x.rs is not one; nor is tests/ alone; api/openapi.yaml is";
+    let found: Vec<&str> = named_paths(text).into_iter().map(|(_, p)| p).collect();
+    assert_eq!(
+        found,
+        ["tests/core/lens.rs", "docs/limits.md", "api/openapi.yaml"]
+    );
+}
+
+/// Files move; the comments, docs and scripts that name them must move with them (a reader sent
+/// to a test file by its name before the tests were gathered into four binaries finds nothing).
+#[test]
+fn every_path_the_tree_names_exists() {
+    let mut files = Vec::new();
+    for dir in [
+        "src",
+        "tests",
+        "docs",
+        "calibration",
+        "scripts",
+        "shaders",
+        "examples",
+        "api",
+        "console",
+    ] {
+        text_files(&root().join(dir), &mut files);
+    }
+    files.extend(["README.md", "Cargo.toml"].map(|f| root().join(f)));
+    let (mut named, mut missing) = (0, Vec::new());
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (line, path) in named_paths(&text) {
+            named += 1;
+            // Tests name their fixtures relative to `calibration/fixtures/`.
+            let exists = root().join(path).exists()
+                || root().join("calibration/fixtures").join(path).exists();
+            if !exists {
+                let rel = f.strip_prefix(root()).unwrap();
+                missing.push(format!("{}:{line}: {path}", rel.display()));
+            }
+        }
+    }
+    assert!(named > 200, "the scan found only {named} paths");
+    assert!(
+        missing.is_empty(),
+        "paths that do not exist:\n{}",
+        missing.join("\n")
+    );
 }
 
 /// Licences whose terms let a crate licensed `MIT OR Apache-2.0` be used and shipped in

@@ -113,6 +113,9 @@ pub fn start_with(data: &Path, demo: bool, extra: &[&str]) -> (Child, SocketAddr
 /// What the data directory's database holds as the current revision of `resource`.
 #[allow(dead_code)]
 pub fn stored(data: &Path, resource: &str) -> Option<(u64, serde_json::Value)> {
-    let db = omniwarp::server::db::Db::open(Some(&data.join(omniwarp::server::db::FILE))).unwrap();
+    let db = omniwarp::server::storage::db::Db::open(Some(
+        &data.join(omniwarp::server::storage::db::FILE),
+    ))
+    .unwrap();
     db.current(resource).unwrap()
 }

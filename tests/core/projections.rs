@@ -1,5 +1,5 @@
 //! Projection math as data: known values, round trips on dense grids, domain edges, and the
-//! view transform. Where a new projection goes: a row in `KNOWN`, one in `every_projection`.
+//! view transform. Where a new projection goes: rows in `projections.txt`, one in `every_projection`.
 
 use crate::common;
 
@@ -15,221 +15,63 @@ fn dir(lon_deg: f64, lat_deg: f64) -> DVec3 {
     DVec3::new(lat.cos() * lon.sin(), lat.sin(), -lat.cos() * lon.cos())
 }
 
-/// (projection, parameters, aspect h/w, s, t, expected direction)
-fn known() -> Vec<(&'static str, Params, f64, f64, f64, DVec3)> {
-    let s2 = 0.5f64.sqrt();
-    vec![
-        (
-            "flat",
-            p(Some(90.0), Some(90.0), None),
-            1.0,
-            0.0,
-            0.0,
-            DVec3::NEG_Z,
-        ),
-        (
-            "flat",
-            p(Some(90.0), Some(90.0), None),
-            1.0,
-            1.0,
-            0.0,
-            dir(45.0, 0.0),
-        ),
-        (
-            "flat",
-            p(Some(90.0), Some(90.0), None),
-            1.0,
-            1.0,
-            1.0,
-            DVec3::new(1.0, 1.0, -1.0).normalize(),
-        ),
-        (
-            "flat",
-            p(Some(90.0), None, None),
-            0.5,
-            0.0,
-            1.0,
-            DVec3::new(0.0, 0.5, -1.0).normalize(),
-        ),
-        (
-            "cylindrical",
-            p(Some(270.0), Some(90.0), None),
-            0.5,
-            1.0,
-            0.0,
-            dir(135.0, 0.0),
-        ),
-        (
-            "cylindrical",
-            p(Some(270.0), Some(90.0), None),
-            0.5,
-            0.0,
-            1.0,
-            dir(0.0, 45.0),
-        ),
-        (
-            "cylindrical",
-            p(Some(360.0), Some(90.0), None),
-            0.5,
-            -0.5,
-            1.0,
-            DVec3::new(-s2, s2, 0.0),
-        ),
-        (
-            "cylindrical-vertical",
-            p(Some(90.0), Some(270.0), None),
-            2.0,
-            0.0,
-            1.0,
-            DVec3::new(
-                0.0,
-                (135f64).to_radians().sin(),
-                -(135f64).to_radians().cos(),
-            ),
-        ),
-        (
-            "cylindrical-vertical",
-            p(Some(90.0), Some(270.0), None),
-            2.0,
-            1.0,
-            0.0,
-            dir(45.0, 0.0),
-        ),
-        (
-            "equirect",
-            p(Some(360.0), Some(180.0), None),
-            0.5,
-            0.5,
-            0.0,
-            dir(90.0, 0.0),
-        ),
-        (
-            "equirect",
-            p(Some(360.0), Some(180.0), None),
-            0.5,
-            0.0,
-            1.0,
-            DVec3::Y,
-        ),
-        (
-            "equirect",
-            p(Some(180.0), Some(90.0), None),
-            0.5,
-            -1.0,
-            0.5,
-            dir(-90.0, 22.5),
-        ),
-        (
-            "fisheye",
-            p(None, None, Some(180.0)),
-            1.0,
-            1.0,
-            0.0,
-            DVec3::X,
-        ),
-        (
-            "fisheye",
-            p(None, None, Some(180.0)),
-            1.0,
-            0.0,
-            -1.0,
-            DVec3::NEG_Y,
-        ),
-        (
-            "fisheye",
-            p(None, None, Some(360.0)),
-            1.0,
-            0.5,
-            0.0,
-            DVec3::X,
-        ),
-        (
-            "fisheye",
-            p(None, None, Some(180.0)),
-            0.5,
-            0.5,
-            0.0,
-            DVec3::X,
-        ),
-        (
-            "spherical",
-            p(None, None, Some(260.0)),
-            1.0,
-            0.0,
-            1.0,
-            dir(0.0, 90.0 + 40.0),
-        ),
-        (
-            "equisolid",
-            p(None, None, Some(180.0)),
-            1.0,
-            1.0,
-            0.0,
-            DVec3::X,
-        ),
-        (
-            "equisolid",
-            p(None, None, Some(180.0)),
-            1.0,
-            0.5,
-            0.0,
-            dir(
-                2.0 * (0.5 * (45f64).to_radians().sin()).asin().to_degrees(),
-                0.0,
-            ),
-        ),
-        (
-            "stereographic",
-            p(None, None, Some(180.0)),
-            1.0,
-            0.0,
-            1.0,
-            DVec3::Y,
-        ),
-        (
-            "stereographic",
-            p(None, None, Some(180.0)),
-            1.0,
-            0.5,
-            0.0,
-            dir(2.0 * (0.5f64).atan().to_degrees(), 0.0),
-        ),
-        (
-            "orthographic",
-            p(None, None, Some(180.0)),
-            1.0,
-            0.5,
-            0.0,
-            dir(30.0, 0.0),
-        ),
-        ("domemaster", Params::default(), 1.0, 0.0, 0.0, DVec3::Y),
-        (
-            "domemaster",
-            Params::default(),
-            1.0,
-            0.0,
-            -1.0,
-            DVec3::NEG_Z,
-        ),
-        ("domemaster", Params::default(), 1.0, 1.0, 0.0, DVec3::X),
-        (
-            "domemaster",
-            Params {
-                tilt: Some(30.0),
-                ..Params::default()
-            },
-            1.0,
-            0.0,
-            0.0,
-            dir(0.0, 60.0),
-        ),
-    ]
+/// A row of `projections.txt`: (projection, parameters, aspect h/w, s, t, expected direction).
+type Known = (String, Params, f64, f64, f64, DVec3);
+
+fn known() -> Vec<Known> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/core/projections.txt");
+    let text = std::fs::read_to_string(path).unwrap();
+    let num = |w: &str| -> f64 {
+        w.parse()
+            .unwrap_or_else(|_| panic!("`{w}` is not a number"))
+    };
+    text.lines()
+        .map(|l| l.split('#').next().unwrap().trim())
+        .filter(|l| !l.is_empty())
+        .map(|line| {
+            let mut words = line.split_whitespace().peekable();
+            let name = words.next().unwrap().to_string();
+            let mut params = Params::default();
+            while let Some(w) = words.next_if(|w| *w == "-" || w.contains('=')) {
+                let Some((key, value)) = w.split_once('=') else {
+                    continue;
+                };
+                let slot = match key {
+                    "hfov" => &mut params.hfov,
+                    "vfov" => &mut params.vfov,
+                    "fov" => &mut params.fov,
+                    "tilt" => &mut params.tilt,
+                    _ => panic!("{line}: unknown parameter {key}"),
+                };
+                *slot = Some(num(value));
+            }
+            let rest: Vec<&str> = words.collect();
+            let [aspect, s, t, kind, dir @ ..] = rest.as_slice() else {
+                panic!("{line}: expected aspect, s, t and a direction")
+            };
+            let want = match (*kind, dir) {
+                ("lonlat", [lon, lat]) => self::dir(num(lon), num(lat)),
+                ("xyz", [x, y, z]) => DVec3::new(num(x), num(y), num(z)).normalize(),
+                _ => panic!("{line}: the direction is `lonlat LON LAT` or `xyz X Y Z`"),
+            };
+            (name, params, num(aspect), num(s), num(t), want)
+        })
+        .collect()
 }
 
 #[test]
 fn known_values() {
-    for (name, params, aspect, s, t, want) in known() {
-        let proj = projection::build(name, &params, aspect).unwrap();
+    let rows = known();
+    let names: std::collections::BTreeSet<&str> = rows.iter().map(|r| r.0.as_str()).collect();
+    for p in REGISTRY {
+        assert!(
+            names.contains(p.name),
+            "projections.txt has no row for {}",
+            p.name
+        );
+    }
+    for (name, params, aspect, s, t, want) in rows {
+        let proj = projection::build(&name, &params, aspect).unwrap();
         let got = proj.forward(s, t).unwrap();
         assert!(
             got.abs_diff_eq(want, 1e-12),

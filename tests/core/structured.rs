@@ -4,8 +4,8 @@
 
 use omniwarp::calibration::{ModelChoice, Problem, calibrate};
 use omniwarp::rig::{Channel, ChannelDoc, LensDoc, PoseDoc, Rig};
-use omniwarp::structured::bench::{Bench, BenchOptions};
 use omniwarp::structured::decode::{DecodeOptions, Decoded, decode};
+use omniwarp::structured::simulator::{Simulator, SimulatorOptions};
 use omniwarp::structured::{Grey, check, correspondences};
 use std::path::Path;
 
@@ -132,7 +132,7 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-fn capture_all(bench: &Bench) -> Vec<Grey> {
+fn capture_all(bench: &Simulator) -> Vec<Grey> {
     (0..bench.patterns().len())
         .map(|n| bench.capture(n).unwrap())
         .collect()
@@ -140,7 +140,7 @@ fn capture_all(bench: &Bench) -> Vec<Grey> {
 
 /// Decoded − true projector coordinate over the pixels both know; and how many the truth
 /// lights.
-fn decode_errors(bench: &Bench, decoded: &Decoded) -> (Vec<f64>, usize) {
+fn decode_errors(bench: &Simulator, decoded: &Decoded) -> (Vec<f64>, usize) {
     let (mut errors, mut lit) = (Vec::new(), 0);
     for y in 0..decoded.height {
         for x in 0..decoded.width {
@@ -159,7 +159,7 @@ fn captures_decode_and_calibrate_the_dome_projector_to_its_truth() {
     let rig = dome();
     let projector = rig.channel("front").unwrap().clone();
     let camera = fisheye(1920, 1080);
-    let bench = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let bench = Simulator::new(&rig, &projector, &camera, SimulatorOptions::default()).unwrap();
     let frames = capture_all(&bench);
     let decoded = decode(bench.patterns(), &frames, &DecodeOptions::default()).unwrap();
     let (mut errors, lit) = decode_errors(&bench, &decoded);
@@ -243,15 +243,15 @@ fn inter_reflection_on_the_dome_leaves_one_percent_gross_errors_at_most() {
     let rig = dome();
     let projector = rig.channel("front").unwrap().clone();
     let camera = fisheye(1920, 1080);
-    let opts = BenchOptions {
+    let opts = SimulatorOptions {
         interreflection: 0.2,
-        ..BenchOptions::default()
+        ..SimulatorOptions::default()
     };
-    let bench = Bench::new(&rig, &projector, &camera, opts).unwrap();
+    let bench = Simulator::new(&rig, &projector, &camera, opts).unwrap();
     let frames = capture_all(&bench);
     // The bounce lights the whole dome: under white, the pixels the projector does not reach
     // are brighter than without it.
-    let plain = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let plain = Simulator::new(&rig, &projector, &camera, SimulatorOptions::default()).unwrap();
     let white_plain = plain.capture(0).unwrap();
     let brighter = (0..1080)
         .flat_map(|y| (0..1920).map(move |x| (x, y)))
@@ -292,14 +292,14 @@ fn a_defocused_camera_decodes_with_a_longer_period() {
     // where the blur is twice as wide in projector pixels, to save time.)
     let rig = dome();
     let projector = rig.channel("front").unwrap().clone();
-    let fisheye = |w, h| omniwarp::structured::bench::fisheye_at_eye(&rig, &projector, w, h);
+    let fisheye = |w, h| omniwarp::structured::simulator::fisheye_at_eye(&rig, &projector, w, h);
     let decoded = |period: u32, camera: Channel| {
-        let opts = BenchOptions {
+        let opts = SimulatorOptions {
             blur: 4.0,
             period,
             ..Default::default()
         };
-        let bench = Bench::new(&rig, &projector, &camera, opts).unwrap();
+        let bench = Simulator::new(&rig, &projector, &camera, opts).unwrap();
         assert_eq!(bench.patterns().period, period);
         let decoded = decode(
             bench.patterns(),
@@ -333,7 +333,7 @@ fn a_yaw_of_five_hundredths_of_a_degree_is_detected_and_noise_is_not() {
     // A small camera watching the projector: the verdict is on the median of thousands of
     // pixels either way.
     let camera = pinhole(480, 270, 400.0, [0.0, 0.173648, -0.984808]);
-    let mut bench = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let mut bench = Simulator::new(&rig, &projector, &camera, SimulatorOptions::default()).unwrap();
     let opts = DecodeOptions::default();
     for seed in 100..120 {
         bench.reseed(seed);
@@ -352,7 +352,7 @@ fn a_yaw_of_five_hundredths_of_a_degree_is_detected_and_noise_is_not() {
     front.pose.look_up = Some(up.to_array());
     let turned_rig = Rig::from_doc(doc).unwrap();
     let turned = turned_rig.channel("front").unwrap().clone();
-    let bench = Bench::new(&turned_rig, &turned, &camera, BenchOptions::default()).unwrap();
+    let bench = Simulator::new(&turned_rig, &turned, &camera, SimulatorOptions::default()).unwrap();
     let decoded = decode(bench.patterns(), &capture_all(&bench), &opts).unwrap();
     let c = check(&decoded, &camera, &rig.doc.screen, &projector);
     eprintln!(
@@ -547,8 +547,9 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
     let s = state_with(None, None, omniwarp::rig::RigDoc::parse(&text).unwrap());
     let rig = dome();
     let projector = rig.channel("front").unwrap().clone();
-    let camera = omniwarp::structured::bench::fisheye_at_eye(&rig, &projector, 1280, 720).unwrap();
-    let bench = Bench::new(&rig, &projector, &camera, BenchOptions::default()).unwrap();
+    let camera =
+        omniwarp::structured::simulator::fisheye_at_eye(&rig, &projector, 1280, 720).unwrap();
+    let bench = Simulator::new(&rig, &projector, &camera, SimulatorOptions::default()).unwrap();
     let put = |n: String, ct: &str, body: Vec<u8>| {
         Request::put(format!("/v1/channels/front/captures/{n}"))
             .header(header::CONTENT_TYPE, ct)
@@ -735,7 +736,7 @@ fn two_camera_poses_measure_the_dome_radius() {
     };
     let opts = DecodeOptions::default();
     let shoot = |c: &Channel| {
-        let bench = Bench::new(&rig, &projector, c, BenchOptions::default()).unwrap();
+        let bench = Simulator::new(&rig, &projector, c, SimulatorOptions::default()).unwrap();
         decode(bench.patterns(), &capture_all(&bench), &opts).unwrap()
     };
     let (ca, cb) = (camera(-0.5), camera(0.5));
@@ -760,7 +761,8 @@ fn a_camera_pose_from_eight_markers_calibrates_the_projector_as_well() {
     use omniwarp::structured::camera_pose;
     let rig = dome();
     let projector = rig.channel("front").unwrap().clone();
-    let truth = omniwarp::structured::bench::fisheye_at_eye(&rig, &projector, 1280, 720).unwrap();
+    let truth =
+        omniwarp::structured::simulator::fisheye_at_eye(&rig, &projector, 1280, 720).unwrap();
     let markers = markers(&rig, &truth);
     // The camera as known before: its lens, and a pose that is wrong.
     let mut guess = truth.clone();
@@ -775,7 +777,7 @@ fn a_camera_pose_from_eight_markers_calibrates_the_projector_as_well() {
     assert!(off < 0.005, "camera {off} m off");
     assert!(camera_pose(&guess, &markers[..3]).is_err());
 
-    let bench = Bench::new(&rig, &projector, &truth, BenchOptions::default()).unwrap();
+    let bench = Simulator::new(&rig, &projector, &truth, SimulatorOptions::default()).unwrap();
     let decoded = decode(
         bench.patterns(),
         &capture_all(&bench),
@@ -1081,7 +1083,7 @@ async fn the_daemon_measures_the_wall_from_two_views() {
         Channel::from_doc(&doc, "").unwrap()
     });
     for (camera, view) in cameras.iter().zip(["a", "b"]) {
-        let bench = Bench::new(&rig, &projector, camera, BenchOptions::default()).unwrap();
+        let bench = Simulator::new(&rig, &projector, camera, SimulatorOptions::default()).unwrap();
         for n in 0..bench.patterns().len() {
             let png = bench.capture(n).unwrap().png().unwrap();
             let req = Request::put(format!("/v1/channels/centre/captures/{n}?view={view}"))
@@ -1159,14 +1161,15 @@ fn xor_codes_decode_the_corner_where_inter_reflection_defeats_the_gray_code() {
     let projector = rig.channels[0].clone();
     // Light bounced between the walls as strong as the direct light, on average; the exposure
     // lowered so that the brightest pixels, near the corner, do not saturate.
-    let opts = BenchOptions {
+    let opts = SimulatorOptions {
         interreflection: 1.0,
         exposure: 0.4,
-        ..BenchOptions::default()
+        ..SimulatorOptions::default()
     };
     let mut figures = Vec::new();
     for code in [Code::Gray, Code::Xor] {
-        let bench = Bench::new(&rig, &projector, &camera, BenchOptions { code, ..opts }).unwrap();
+        let bench =
+            Simulator::new(&rig, &projector, &camera, SimulatorOptions { code, ..opts }).unwrap();
         let decoded = decode(
             bench.patterns(),
             &capture_all(&bench),

@@ -293,8 +293,9 @@ async fn a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_disk
     // The same screen kept in the database (written there by a bug or a hand) stops the start;
     // --reset starts the channel's screen again from the geometry, as a new revision.
     {
-        let db = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db"))).unwrap();
-        let meta = omniwarp::server::db::Meta {
+        let db =
+            omniwarp::server::storage::db::Db::open(Some(&dir.path().join("omniwarp.db"))).unwrap();
+        let meta = omniwarp::server::storage::db::Meta {
             who: "test".into(),
             action: "put",
             request: None,
@@ -544,7 +545,7 @@ async fn proposals_are_capped_oldest_first() {
         StatusCode::NOT_FOUND
     );
     assert_eq!(call(&s, get("/v1/proposals/7")).await.0, StatusCode::OK);
-    let kept = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db")))
+    let kept = omniwarp::server::storage::db::Db::open(Some(&dir.path().join("omniwarp.db")))
         .unwrap()
         .proposals()
         .unwrap()
@@ -786,8 +787,9 @@ async fn a_document_refused_on_start_falls_back_to_the_revision_before_as_a_new_
     let (_, mut doc) = common::server::stored(dir.path(), "channels/left/tiles").unwrap();
     doc["layout"]["features"][0]["x"] = serde_json::json!(7.0);
     doc["revision"] = serde_json::json!(4);
-    let db = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db"))).unwrap();
-    let meta = omniwarp::server::db::Meta {
+    let db =
+        omniwarp::server::storage::db::Db::open(Some(&dir.path().join("omniwarp.db"))).unwrap();
+    let meta = omniwarp::server::storage::db::Meta {
         who: "test".into(),
         action: "put",
         request: None,

@@ -367,7 +367,7 @@ async fn calibration_proposals_are_solved_kept_and_applied() {
         assert!((got.as_f64().unwrap() - ch.position[k]).abs() < 1e-3, "{p}");
     }
     let pid = p["id"].as_u64().unwrap();
-    let kept = omniwarp::server::db::Db::open(Some(&dir.path().join("omniwarp.db")))
+    let kept = omniwarp::server::storage::db::Db::open(Some(&dir.path().join("omniwarp.db")))
         .unwrap()
         .proposals()
         .unwrap();

@@ -8,8 +8,8 @@ use anyhow::Result;
 use clap::Args;
 use omniwarp::calibration::ModelChoice;
 use omniwarp::rig::Channel;
-use omniwarp::structured::bench::Bench;
 use omniwarp::structured::decode::{DecodeOptions, decode};
+use omniwarp::structured::simulator::Simulator;
 use omniwarp::structured::{Grey, calibrate_decoded};
 use std::time::Instant;
 
@@ -39,8 +39,8 @@ pub fn run(a: CameraBenchArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
 
     let t = Instant::now();
-    let bench =
-        Bench::new(&rig, &projector, &camera, opts).map_err(|e| anyhow::anyhow!("{}", named(e)))?;
+    let bench = Simulator::new(&rig, &projector, &camera, opts)
+        .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     let t_bench = t.elapsed();
     let t = Instant::now();
     let frames: Vec<Grey> = (0..bench.patterns().len())

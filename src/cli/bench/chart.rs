@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 #[derive(Args)]
 pub struct ChartArgs {
     /// Output chart of the tile screens (.svg); without --scene.
-    #[arg(long, default_value = "calibration/charts/tiles-grid-error.svg")]
+    #[arg(long, default_value = "calibration/bench/charts/tiles-grid-error.svg")]
     out: PathBuf,
 }
 

@@ -94,7 +94,7 @@ pub fn run(dome_rig: &Path) -> Result<()> {
             };
             let rig = Rig::from_doc(doc)?;
             // The best of three, each with its outputs freshly allocated (as a warp computed
-            // on request has them), as the C probe of scripts/bench-peers reports its best.
+            // on request has them), as the C probe of calibration/bench/bench-peers reports its best.
             let s = (0..3)
                 .map(|_| {
                     let t = Instant::now();

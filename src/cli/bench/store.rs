@@ -8,7 +8,7 @@ use anyhow::Result;
 use clap::Args;
 use omniwarp::image_io::atomic_write;
 use omniwarp::projection::Params;
-use omniwarp::server::db::{Db, Meta, SNAPSHOT_EVERY};
+use omniwarp::server::storage::db::{Db, Meta, SNAPSHOT_EVERY};
 use omniwarp::tiles::build::{Source, from_source};
 use omniwarp::tiles::{Layout, TileScreen};
 use std::path::Path;

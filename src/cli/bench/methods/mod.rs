@@ -63,11 +63,11 @@ pub struct MethodChartArgs {
     pub reference_samples: u32,
     /// Also ffmpeg's v360 and OpenCV's remap warping the same cube read back, with each of
     /// their filters (cylindrical views seen straight ahead only). ffmpeg from PATH, OpenCV
-    /// from target/bench-venv or python3; scripts/bench-peers installs both.
+    /// from target/bench-venv or python3; calibration/bench/bench-peers installs both.
     #[arg(long)]
     pub peers: bool,
     /// Where the chart goes: NAME.csv and NAME.svg.
-    #[arg(long, default_value = "calibration/charts/methods")]
+    #[arg(long, default_value = "calibration/bench/charts/methods")]
     pub name: PathBuf,
     #[arg(long)]
     pub adapter: Option<String>,
@@ -461,7 +461,7 @@ fn peer_rows_in(
                 .output()
                 .is_ok_and(|o| o.status.success())
         })
-        .ok_or_else(|| anyhow::anyhow!("--peers: no Python with OpenCV (scripts/bench-peers installs one in target/bench-venv)"))?;
+        .ok_or_else(|| anyhow::anyhow!("--peers: no Python with OpenCV (calibration/bench/bench-peers installs one in target/bench-venv)"))?;
     let script =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/bench/opencv_remap.py");
     for filter in ["nearest", "bilinear", "bicubic"] {

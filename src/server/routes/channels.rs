@@ -1,14 +1,15 @@
 //! Per-channel editable resources: the content canvas and the tile screen, each with its own
 //! revision (`ETag`, `If-Match`, 412 with the current one when stale).
 
-use super::ApiError;
-use super::canvas::Canvas;
-use super::db::Meta;
-use super::jobs::run_write;
-use super::state::{AppState, AtRevision, Query, document_at, if_match, meta, parse_body, tagged};
-use super::store::{ChannelData, Versioned, content_resource, tiles_resource};
-use crate::rig::{Channel, Rig};
-use crate::tiles::build::{extend_past_edge, grid_of};
+use crate::rig::{Rig, SAMPLED_COLUMNS, default_rows};
+use crate::server::ApiError;
+use crate::server::http::jobs::run_write;
+use crate::server::http::state::{
+    AppState, AtRevision, Query, document_at, if_match, meta, parse_body, tagged,
+};
+use crate::server::storage::canvas::Canvas;
+use crate::server::storage::db::Meta;
+use crate::server::storage::store::{ChannelData, Versioned, content_resource, tiles_resource};
 use crate::tiles::edit::Edit;
 use crate::tiles::{Layout, TileScreen};
 use axum::body::Bytes;
@@ -18,43 +19,8 @@ use axum::response::Response;
 use serde::Deserialize;
 use std::sync::Arc;
 
-/// Columns of a tile screen sampled from the geometry (rows follow the aspect ratio).
-const SAMPLED_COLUMNS: usize = 33;
-
 fn not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("no channel `{id}`"))
-}
-
-/// The channel's geometric warp as a tile screen: feature (x, y) shows the content direction of
-/// the projector pixel at (x·W − ½, y·H − ½), i.e. the grid runs from image edge to image edge.
-/// Features just off the wall are extrapolated ([`extend_past_edge`]): the tiles across the
-/// wall's edge stay, and the warp's own footprint cuts them (see `jobs`).
-pub fn sample_geometry(
-    rig: &Rig,
-    ch: &Channel,
-    columns: usize,
-    rows: usize,
-) -> crate::Result<TileScreen> {
-    let (w, h) = (f64::from(ch.width), f64::from(ch.height));
-    let pixel = |x: f64, y: f64| [x * w - 0.5, y * h - 0.5];
-    let mut t = grid_of(columns, rows, |s, t| {
-        let v = rig
-            .wall_point(ch, pixel((s + 1.0) / 2.0, (1.0 - t) / 2.0))
-            .and_then(|p| rig.sampling_vector(p));
-        (v, 1.0)
-    })?;
-    let wider = rig.doc.screen.extended();
-    extend_past_edge(&mut t, |x, y| {
-        let ray = ch.lens.unproject(pixel(x, y)).ok()?;
-        let p = wider.intersect(ch.position, ch.rotation * ray).point()?;
-        rig.sampling_vector(p)
-    });
-    Ok(t)
-}
-
-fn sampled_rows(ch: &Channel) -> usize {
-    let r = (SAMPLED_COLUMNS - 1) as f64 * f64::from(ch.height) / f64::from(ch.width);
-    (r.round() as usize + 1).max(2)
 }
 
 async fn data(
@@ -279,10 +245,7 @@ pub async fn get_tiles(
         None => {
             let (rig, _) = s.store.snapshot();
             let ch = rig.channel(&id).map_err(|_| not_found(&id))?;
-            (
-                sample_geometry(&rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
-                true,
-            )
+            (rig.default_tiles(ch)?, true)
         }
     };
     Ok(tagged(
@@ -433,7 +396,7 @@ fn merges(
     let ch = rig.channel(id).map_err(|_| not_found(id))?;
     let before = match before {
         Some(t) => t,
-        None => sample_geometry(rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
+        None => rig.default_tiles(ch)?,
     };
     let after = apply_edits(rig, id, Some(before.clone()), edits.to_vec(), cancel)?;
     let json = |t: &TileScreen| serde_json::to_value(t).expect("tile screens serialise");
@@ -482,7 +445,7 @@ fn apply_edits(
     let ch = rig.channel(id).map_err(|_| not_found(id))?;
     let mut screen = match start {
         Some(t) => t,
-        None => sample_geometry(rig, ch, SAMPLED_COLUMNS, sampled_rows(ch))?,
+        None => rig.default_tiles(ch)?,
     };
     for (n, e) in edits.into_iter().enumerate() {
         if cancel.load(std::sync::atomic::Ordering::Relaxed) {
@@ -500,9 +463,9 @@ fn apply_edits(
             Edit::Reset => {
                 let (c, r) = match &screen.layout {
                     crate::tiles::Layout::Grid { columns, rows, .. } => (*columns, *rows),
-                    crate::tiles::Layout::Soup { .. } => (SAMPLED_COLUMNS, sampled_rows(ch)),
+                    crate::tiles::Layout::Soup { .. } => (SAMPLED_COLUMNS, default_rows(ch)),
                 };
-                sample_geometry(rig, ch, c, r).map_err(named)?
+                rig.sample_tiles(ch, c, r).map_err(named)?
             }
             // A channel's screen is refined towards its geometry, which the rig knows.
             Edit::Refine {

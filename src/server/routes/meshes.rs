@@ -4,11 +4,11 @@
 //! name, once uploaded, keeps its contents (a different upload under it is a 409), so cached
 //! warps keyed by the rig document stay true to the mesh they were computed from.
 
-use super::ApiError;
-use super::jobs::run_write;
-use super::state::AppState;
-use super::store::mesh_name;
 use crate::image_io::{atomic_write, create_dir_durably};
+use crate::server::ApiError;
+use crate::server::http::jobs::run_write;
+use crate::server::http::state::AppState;
+use crate::server::storage::store::mesh_name;
 use crate::surface::{Mesh, parse_obj_triangles};
 use axum::Json;
 use axum::body::Bytes;

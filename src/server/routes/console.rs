@@ -8,7 +8,7 @@
 //! afterwards goes through `/v1` with the token the technician types in. They are refused to
 //! frames of other sites and may load nothing from elsewhere (the Content-Security-Policy).
 
-use super::state::AppState;
+use crate::server::http::state::AppState;
 use axum::Router;
 use axum::extract::Path;
 use axum::http::{HeaderValue, Method, StatusCode, header};
@@ -20,7 +20,7 @@ macro_rules! assets {
     ($($name:literal => $mime:literal,)*) => {
         /// The console's files: name, media type, contents.
         pub const ASSETS: &[(&str, &str, &[u8])] = &[
-            $(($name, $mime, include_bytes!(concat!("../../console/", $name))),)*
+            $(($name, $mime, include_bytes!(concat!("../../../console/", $name))),)*
         ];
     };
 }
@@ -48,7 +48,7 @@ pub fn is_asset(method: &Method, path: &str) -> bool {
 
 fn serve(name: &str) -> Response {
     let Some((_, mime, bytes)) = ASSETS.iter().find(|(n, _, _)| *n == name) else {
-        return super::ApiError::NotFound(format!("the console has no file `{name}`"))
+        return crate::server::ApiError::NotFound(format!("the console has no file `{name}`"))
             .into_response();
     };
     let mut resp = (StatusCode::OK, *bytes).into_response();

@@ -3,22 +3,23 @@
 //! once (more get 503 with `Retry-After`), is given up when the client goes away, and is cached
 //! by a hash of its inputs. Each computed warp map is also written under the data directory
 //! (`warps/<id>-<hash>.exr`, by `keep` after the answer) and served from there after a restart.
-//! CPU previews are kept ready per channel (`preview::Previews`).
+//! CPU previews are kept ready per channel (`previews::pattern::Previews`).
 //!
-//! [`WORKERS`]: super::state::WORKERS
+//! [`WORKERS`]: crate::server::http::state::WORKERS
 
-use super::ApiError;
-use super::jobs::{etag, inputs, job, job_from, run_job};
-use super::keep::warp_file;
-use super::preview::{Ask, Grid, Look, Made, default_face, finish};
-use super::scenes::{SceneAsk, SceneMethod};
-use super::state::{AppState, Query};
 use crate::content::pattern::Pattern;
 use crate::gpu::Renderer;
 use crate::image_io::{Compression, Precision, exr_bytes, png_bytes_with};
 use crate::render::Filter;
 use crate::rig::{BlendOptions, blend_png_bytes};
 use crate::scene::ppp::Tolerance;
+use crate::server::ApiError;
+use crate::server::http::jobs::{etag, inputs, job, job_from, run_job};
+use crate::server::http::state::{AppState, Query};
+use crate::server::previews::pattern::{Ask, Grid, Look, Made, default_face, finish};
+use crate::server::previews::scene::{SceneAsk, SceneMethod};
+use crate::server::storage::cache::GpuWarp;
+use crate::server::storage::keep::warp_file;
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
 use axum::http::header;
@@ -32,7 +33,7 @@ use std::time::Instant;
 const MAX_PREVIEW: usize = 4096 * 2304;
 
 /// A large response: its bytes leave in pieces, and the body holds one of the
-/// [`STREAMS`](super::state::STREAMS) permits until it is sent or dropped, so clients that do not
+/// [`STREAMS`](crate::server::http::state::STREAMS) permits until it is sent or dropped, so clients that do not
 /// read cannot make the daemon hold more than that many bodies (503 beyond).
 pub fn file(
     s: &AppState,
@@ -158,7 +159,7 @@ pub struct RenderQuery {
     /// PNG compression: `fast` (default), `balanced` or `high`.
     #[serde(default)]
     compression: Option<String>,
-    /// A procedural 3D scene to show instead of the test pattern (`scenes::SCENES`).
+    /// A procedural 3D scene to show instead of the test pattern (`previews::scene::SCENES`).
     #[serde(default)]
     scene: Option<String>,
     /// How the scene reaches the channel: `cube`, `ppp`, `exact` or `auto`.
@@ -199,109 +200,226 @@ fn invalid(field: &str, reason: impl Into<String>) -> ApiError {
     }
 }
 
+/// A render request, checked in one step: the test pattern through the warp, or a scene.
+enum Checked {
+    Pattern(PatternRender),
+    Scene(SceneAsk, usize, Compression),
+}
+
+/// The test pattern through a channel's warp, as asked for.
+struct PatternRender {
+    exr: bool,
+    /// Output is the channel's size divided by this.
+    scale: usize,
+    ask: Ask,
+    compression: Compression,
+    /// The GPU that renders it; the CPU reference when none.
+    gpu: Option<Arc<GpuWarp>>,
+}
+
+/// The value of the choice named `given`, or a refusal naming `field` and listing the choices.
+fn choice<T: Copy>(field: &str, given: &str, choices: &[(&str, T)]) -> Result<T, ApiError> {
+    match choices.iter().find(|(name, _)| *name == given) {
+        Some((_, value)) => Ok(*value),
+        None => {
+            let names: Vec<&str> = choices.iter().map(|(n, _)| *n).collect();
+            let (last, rest) = names.split_last().expect("choices");
+            Err(invalid(
+                field,
+                format!("must be {} or {last}, got `{given}`", rest.join(", ")),
+            ))
+        }
+    }
+}
+
+impl RenderQuery {
+    /// Every parameter checked against the others and against this machine (`gpu`, its
+    /// adapter if it has one); errors name the parameter.
+    fn check(self, gpu: impl Fn() -> Option<Arc<GpuWarp>>) -> Result<Checked, ApiError> {
+        let exr = choice(
+            "format",
+            self.format.as_deref().unwrap_or("png"),
+            &[("png", false), ("exr", true)],
+        )?;
+        let scale = self.scale.unwrap_or(1);
+        if ![1, 2, 4, 8].contains(&scale) {
+            return Err(invalid(
+                "scale",
+                format!("must be 1, 2, 4 or 8, got {scale}"),
+            ));
+        }
+        let filter = choice(
+            "filter",
+            self.filter.as_deref().unwrap_or("bilinear"),
+            &[
+                ("nearest", Filter::Nearest),
+                ("bilinear", Filter::Bilinear),
+                ("bicubic", Filter::Bicubic),
+            ],
+        )?;
+        let pattern = choice(
+            "content",
+            self.content.as_deref().unwrap_or("smooth"),
+            &[("smooth", Pattern::Smooth), ("checker", Pattern::Checker)],
+        )?;
+        if let Some(face) = self.face
+            && !(8..=2048).contains(&face)
+        {
+            return Err(invalid(
+                "face",
+                format!("must be between 8 and 2048, got {face}"),
+            ));
+        }
+        let compression = match self.compression.as_deref() {
+            None => Compression::Fast,
+            Some(c) => Compression::parse(c).map_err(|e| invalid("compression", e.reason()))?,
+        };
+        if let Some(name) = self.scene.as_deref() {
+            let ask = self.scene_ask(name, gpu)?;
+            return Ok(Checked::Scene(ask, scale as usize, compression));
+        }
+        for (field, given) in [("method", &self.method), ("tolerance", &self.tolerance)] {
+            if given.is_some() {
+                return Err(invalid(
+                    field,
+                    "applies to scene previews (scene=city:small or city:medium); the test pattern is sampled from its cube map",
+                ));
+            }
+        }
+        let gpu = match self.renderer.as_deref().unwrap_or("cpu") {
+            "cpu" => None,
+            r @ ("gpu" | "auto") => {
+                let g = gpu();
+                if g.is_none() && r == "gpu" {
+                    return Err(invalid("renderer", "this machine has no GPU adapter"));
+                }
+                if g.is_some() && (exr || !matches!(filter, Filter::Bilinear)) {
+                    return Err(invalid(
+                        "renderer",
+                        "the GPU renders 8-bit PNG with the bilinear filter",
+                    ));
+                }
+                g
+            }
+            other => {
+                return Err(invalid(
+                    "renderer",
+                    format!("must be cpu, gpu or auto, got `{other}`"),
+                ));
+            }
+        };
+        Ok(Checked::Pattern(PatternRender {
+            exr,
+            scale: scale as usize,
+            ask: Ask {
+                scale: scale as usize,
+                pattern,
+                face: self.face,
+                filter,
+            },
+            compression,
+            gpu,
+        }))
+    }
+
+    /// The scene preview asked for: the parameters that apply to the test pattern only are
+    /// refused, the method's own ones checked.
+    fn scene_ask(
+        &self,
+        name: &str,
+        gpu: impl Fn() -> Option<Arc<GpuWarp>>,
+    ) -> Result<SceneAsk, ApiError> {
+        let scene = SceneAsk::scene(name)?;
+        for (field, wrong, reason) in [
+            (
+                "format",
+                self.format.as_deref().is_some_and(|f| f != "png"),
+                "scene previews are 8-bit PNG",
+            ),
+            (
+                "filter",
+                self.filter.as_deref().is_some_and(|f| f != "bilinear"),
+                "scene previews sample their cube map bilinearly",
+            ),
+            (
+                "content",
+                self.content.is_some(),
+                "a scene preview shows the scene, not the test pattern",
+            ),
+        ] {
+            if wrong {
+                return Err(invalid(field, reason));
+            }
+        }
+        let method = SceneMethod::parse(self.method.as_deref().unwrap_or("cube"))?;
+        if self.tolerance.is_some() && !matches!(method, SceneMethod::Ppp | SceneMethod::Auto) {
+            return Err(invalid(
+                "tolerance",
+                "chooses the cut of method=ppp or the method of method=auto",
+            ));
+        }
+        if self.face.is_some() && method != SceneMethod::Cube {
+            return Err(invalid("face", "the cube's face size, for method=cube"));
+        }
+        let tolerance = Tolerance::parse(self.tolerance.as_deref().unwrap_or("0.25px"))?;
+        let renderer = match self.renderer.as_deref().unwrap_or("cpu") {
+            "cpu" => Renderer::Cpu,
+            "gpu" if gpu().is_none() => {
+                return Err(invalid("renderer", "this machine has no GPU adapter"));
+            }
+            "gpu" => Renderer::Gpu,
+            "auto" if gpu().is_some() => Renderer::Gpu,
+            "auto" => Renderer::Cpu,
+            other => {
+                return Err(invalid(
+                    "renderer",
+                    format!("must be cpu, gpu or auto, got `{other}`"),
+                ));
+            }
+        };
+        Ok(SceneAsk {
+            scene,
+            method,
+            tolerance,
+            renderer,
+            face: self.face.map(|f| f as u32),
+        })
+    }
+}
+
 pub async fn render(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
     Query(q): Query<RenderQuery>,
 ) -> Result<Response, ApiError> {
-    let exr = match q.format.as_deref().unwrap_or("png") {
-        "png" => false,
-        "exr" => true,
-        other => {
-            return Err(invalid(
-                "format",
-                format!("must be png or exr, got `{other}`"),
-            ));
-        }
-    };
-    let scale = q.scale.unwrap_or(1);
-    if ![1, 2, 4, 8].contains(&scale) {
-        return Err(invalid(
-            "scale",
-            format!("must be 1, 2, 4 or 8, got {scale}"),
-        ));
+    match q.check(|| s.gpu())? {
+        Checked::Pattern(r) => render_pattern(s, id, r).await,
+        Checked::Scene(ask, k, compression) => render_scene(s, id, ask, k, compression).await,
     }
-    let filter = match q.filter.as_deref().unwrap_or("bilinear") {
-        "nearest" => Filter::Nearest,
-        "bilinear" => Filter::Bilinear,
-        "bicubic" => Filter::Bicubic,
-        other => {
-            return Err(invalid(
-                "filter",
-                format!("must be nearest, bilinear or bicubic, got `{other}`"),
-            ));
-        }
-    };
-    let pattern = match q.content.as_deref().unwrap_or("smooth") {
-        "smooth" => Pattern::Smooth,
-        "checker" => Pattern::Checker,
-        other => {
-            return Err(invalid(
-                "content",
-                format!("must be smooth or checker, got `{other}`"),
-            ));
-        }
-    };
-    if let Some(face) = q.face
-        && !(8..=2048).contains(&face)
-    {
-        return Err(invalid(
-            "face",
-            format!("must be between 8 and 2048, got {face}"),
-        ));
-    }
-    let compression = match q.compression.as_deref() {
-        None => Compression::Fast,
-        Some(c) => Compression::parse(c).map_err(|e| invalid("compression", e.reason()))?,
-    };
-    if let Some(name) = q.scene.as_deref() {
-        return render_scene(s, id, &q, name, scale as usize, compression).await;
-    }
-    for (field, given) in [("method", &q.method), ("tolerance", &q.tolerance)] {
-        if given.is_some() {
-            return Err(invalid(
-                field,
-                "applies to scene previews (scene=city:small or city:medium); the test pattern is sampled from its cube map",
-            ));
-        }
-    }
-    let gpu = match q.renderer.as_deref().unwrap_or("cpu") {
-        "cpu" => None,
-        r @ ("gpu" | "auto") => {
-            let g = s.gpu();
-            if g.is_none() && r == "gpu" {
-                return Err(invalid("renderer", "this machine has no GPU adapter"));
-            }
-            if g.is_some() && (exr || !matches!(filter, Filter::Bilinear)) {
-                return Err(invalid(
-                    "renderer",
-                    "the GPU renders 8-bit PNG with the bilinear filter",
-                ));
-            }
-            g
-        }
-        other => {
-            return Err(invalid(
-                "renderer",
-                format!("must be cpu, gpu or auto, got `{other}`"),
-            ));
-        }
-    };
+}
+
+/// A channel's preview showing the test pattern; CPU PNG previews are kept ready between
+/// requests, and say how they were made and where their time went.
+async fn render_pattern(
+    s: Arc<AppState>,
+    id: String,
+    r: PatternRender,
+) -> Result<Response, ApiError> {
+    let PatternRender {
+        exr,
+        scale: k,
+        ask,
+        compression,
+        gpu,
+    } = r;
     let j = job(&s, &id).await?;
     let (w, h) = (j.computed.map.width(), j.computed.map.height());
-    let k = scale as usize;
     let (ow, oh) = (w.div_ceil(k), h.div_ceil(k));
     check_preview_size(ow, oh)?;
     let etag = j.etag();
     let (computed, key, warp_time) = (j.computed.clone(), j.key, j.computed_in);
     let state = s.clone();
     let (bytes, made) = run_job(&s, move |cancel| {
-        let ask = Ask {
-            scale: k,
-            pattern,
-            face: q.face,
-            filter,
-        };
         if !exr && gpu.is_none() {
             // The CPU preview: kept ready between requests, so a repeated one costs a frame
             // and its encoding.
@@ -340,11 +458,10 @@ pub async fn render(
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled.into());
         }
-        let face = q.face.unwrap_or_else(|| default_face(&map, exr));
         let look = Look {
-            pattern,
-            face,
-            filter,
+            pattern: ask.pattern,
+            face: ask.face.unwrap_or_else(|| default_face(&map, exr)),
+            filter: ask.filter,
         };
         if exr {
             let cube = look.cube::<[f32; 4]>([true; 6], 1.0);
@@ -389,77 +506,14 @@ pub async fn render(
 }
 
 /// A channel's preview showing a procedural scene, drawn by the method asked for
-/// (`scenes::ScenePreviews`), with the tiles' f and the blend applied as for the pattern.
+/// (`previews::scene::ScenePreviews`), with the tiles' f and the blend applied as for the pattern.
 async fn render_scene(
     s: Arc<AppState>,
     id: String,
-    q: &RenderQuery,
-    name: &str,
+    ask: SceneAsk,
     k: usize,
     compression: Compression,
 ) -> Result<Response, ApiError> {
-    let scene = SceneAsk::scene(name)?;
-    for (field, wrong, reason) in [
-        (
-            "format",
-            q.format.as_deref().is_some_and(|f| f != "png"),
-            "scene previews are 8-bit PNG",
-        ),
-        (
-            "filter",
-            q.filter.as_deref().is_some_and(|f| f != "bilinear"),
-            "scene previews sample their cube map bilinearly",
-        ),
-        (
-            "content",
-            q.content.is_some(),
-            "a scene preview shows the scene, not the test pattern",
-        ),
-    ] {
-        if wrong {
-            return Err(invalid(field, reason));
-        }
-    }
-    let method = SceneMethod::parse(q.method.as_deref().unwrap_or("cube"))?;
-    if q.tolerance.is_some() && !matches!(method, SceneMethod::Ppp | SceneMethod::Auto) {
-        return Err(invalid(
-            "tolerance",
-            "chooses the cut of method=ppp or the method of method=auto",
-        ));
-    }
-    if q.face.is_some() && method != SceneMethod::Cube {
-        return Err(invalid("face", "the cube's face size, for method=cube"));
-    }
-    let tolerance = Tolerance::parse(q.tolerance.as_deref().unwrap_or("0.25px"))?;
-    let renderer = match q.renderer.as_deref().unwrap_or("cpu") {
-        "cpu" => Renderer::Cpu,
-        "gpu" => {
-            if s.gpu().is_none() {
-                return Err(invalid("renderer", "this machine has no GPU adapter"));
-            }
-            Renderer::Gpu
-        }
-        "auto" => {
-            if s.gpu().is_some() {
-                Renderer::Gpu
-            } else {
-                Renderer::Cpu
-            }
-        }
-        other => {
-            return Err(invalid(
-                "renderer",
-                format!("must be cpu, gpu or auto, got `{other}`"),
-            ));
-        }
-    };
-    let ask = SceneAsk {
-        scene,
-        method,
-        tolerance,
-        renderer,
-        face: q.face.map(|f| f as u32),
-    };
     let j = job(&s, &id).await?;
     let (w, h) = (j.computed.map.width(), j.computed.map.height());
     let (ow, oh) = (w.div_ceil(k), h.div_ceil(k));

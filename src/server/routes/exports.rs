@@ -3,15 +3,15 @@
 //! tolerance (`?tolerance=`, content pixels for 2d and meshes, millimetres for a3); the chosen
 //! size and its measured worst error come back in `X-Omniwarp-Grid` and `X-Omniwarp-Max-Error`.
 
-use super::ApiError;
-use super::jobs::{Job, job, run_job};
 use super::outputs::file;
-use super::state::{AppState, Query};
 use crate::export::bourke::MeshReader;
 use crate::export::channel::{Sources, Tolerance};
 use crate::export::mpcdi::{self, Profile, Reader, Version};
 use crate::export::{content_uv_unbounded, inside, pfm_bytes, remap_pgm_bytes, stmap};
 use crate::image_io::{Precision, exr_bytes};
+use crate::server::ApiError;
+use crate::server::http::jobs::{Job, job, run_job};
+use crate::server::http::state::{AppState, Query};
 use axum::extract::{Path, State};
 use axum::http::HeaderValue;
 use axum::http::StatusCode;

@@ -11,7 +11,7 @@ coordinate the camera pixel's centre sees; pixel centres at whole numbers in bot
 
 Usage: opencv_graycode.py OMNIWARP WORKDIR [bench options passed to omniwarp, e.g.
        --rig R --channel C --camera-size 1920x1080]
-Needs numpy, OpenEXR and opencv-contrib-python-headless (scripts/bench-camera-peer installs them).
+Needs numpy, OpenEXR and opencv-contrib-python-headless (calibration/bench/bench-camera-peer installs them).
 """
 import json
 import os

@@ -1,5 +1,5 @@
 //! History and undo: every revision of the rig, of each channel's content canvas and of its
-//! tile screen is kept (see [`super::db`]), listed by `GET /v1/history`, readable with
+//! tile screen is kept (see [`crate::server::storage::db`]), listed by `GET /v1/history`, readable with
 //! `?revision=N` on the resource itself, and any of them can be made current again by a revert.
 //! Undo and redo are reverts too: each makes a new revision (nothing is rewritten, so another
 //! client's If-Match stays meaningful), and the history row of every revision says where an
@@ -13,13 +13,15 @@
 //! So undo, undo, redo, redo walks back and forth along the edits as in an editor, and a new
 //! edit after an undo drops the redo.
 
-use super::ApiError;
 use super::channels::{Part, commit};
-use super::db::{Db, Meta, Row};
 use super::rig::commit_rig;
-use super::state::{AppState, Query, document_at, if_match, meta, parse_body, tagged};
-use super::store::ChannelData;
 use crate::rig::RigDoc;
+use crate::server::ApiError;
+use crate::server::http::state::{
+    AppState, Query, document_at, if_match, meta, parse_body, tagged,
+};
+use crate::server::storage::db::{Db, Meta, Row};
+use crate::server::storage::store::ChannelData;
 use crate::tiles::TileScreen;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
@@ -185,7 +187,7 @@ async fn rig_step(
     let doc = document_at(&s, "rig".into(), to).await?;
     let doc: RigDoc = serde_json::from_value(doc).map_err(|e| ApiError::Internal(e.to_string()))?;
     let state = s.clone();
-    let rig = super::jobs::run_write(&s, move |_| {
+    let rig = crate::server::http::jobs::run_write(&s, move |_| {
         Ok(state
             .store
             .meshes

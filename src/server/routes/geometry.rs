@@ -5,10 +5,10 @@
 //! (each traced by the channel's exact lens model, as the warp is). Polylines break where the
 //! rays miss the wall; the part of a footprint beyond the wall's edge is given apart (`spill`).
 
-use super::ApiError;
-use super::jobs::run_job;
-use super::state::{AppState, tagged};
 use crate::rig::Rig;
+use crate::server::ApiError;
+use crate::server::http::jobs::run_job;
+use crate::server::http::state::{AppState, tagged};
 use axum::extract::State;
 use axum::response::Response;
 use glam::DVec3;

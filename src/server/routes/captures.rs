@@ -4,12 +4,12 @@
 //! known) decodes them and either proposes a calibration, like the correspondences route, or
 //! checks the channel's current one and says whether the projector moved.
 
-use super::ApiError;
 use super::calib::{keep_offer, offer};
-use super::jobs::run_job;
-use super::state::{AppState, Query, parse_body};
 use crate::calibration::ModelChoice;
 use crate::rig::{Channel, ChannelDoc};
+use crate::server::ApiError;
+use crate::server::http::jobs::run_job;
+use crate::server::http::state::{AppState, Query, parse_body};
 use crate::structured::decode::{DecodeOptions, decode};
 use crate::structured::triangulate::{fit_screen, triangulate};
 use crate::structured::{Grey, PatternSet, calibrate_captures, calibrate_decoded, check};

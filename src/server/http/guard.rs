@@ -10,8 +10,8 @@
 //! without a CORS preflight, which only allowed origins pass). Bodies are read whole here, within
 //! a size limit and a deadline, so a client that sends slowly holds no route.
 
-use super::ApiError;
 use super::state::{AppState, MAX_BODY};
+use crate::server::ApiError;
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};

@@ -4,11 +4,11 @@
 //! validates the new document, makes it durable and only then swaps the snapshot and answers —
 //! an acknowledged edit survives a crash.
 
-use super::ApiError;
-use super::cache::{Computed, Geometry, GpuWarp};
-use super::db::Meta;
-use super::store::Store;
 use crate::content::testcard::Card;
+use crate::server::ApiError;
+use crate::server::storage::cache::{Computed, Geometry, GpuWarp};
+use crate::server::storage::db::Meta;
+use crate::server::storage::store::Store;
 use crate::structured::Grey;
 use axum::Json;
 use axum::body::Bytes;
@@ -84,13 +84,13 @@ pub struct AppState {
     /// The GPU for previews (`?renderer=gpu`), opened on first use.
     pub gpu: std::sync::OnceLock<Option<Arc<GpuWarp>>>,
     /// The previews' procedural content, evaluated once per pattern and face size.
-    pub pattern_cubes: super::preview::PatternCubes,
+    pub pattern_cubes: crate::server::previews::pattern::PatternCubes,
     /// CPU previews ready to render again.
-    pub previews: super::preview::Previews,
+    pub previews: crate::server::previews::pattern::Previews,
     /// Scene previews' renderer and the cuts and choices made for them.
-    pub scene_previews: super::scenes::ScenePreviews,
+    pub scene_previews: crate::server::previews::scene::ScenePreviews,
     /// Writes computed warps to disk after the requests that computed them.
-    pub keeper: super::keep::Keeper,
+    pub keeper: crate::server::storage::keep::Keeper,
     /// What each channel shows: its content or a test card.
     pub shows: Shows,
     /// Camera captures uploaded for calibration.

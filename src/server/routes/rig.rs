@@ -1,10 +1,12 @@
 //! The rig routes: health, version, the rig document and its channels, and the change feed.
 
-use super::ApiError;
-use super::db::Meta;
-use super::jobs::run_write;
-use super::state::{AppState, AtRevision, Query, WORKERS, document_at, if_match, meta, tagged};
 use crate::rig::Rig;
+use crate::server::ApiError;
+use crate::server::http::jobs::run_write;
+use crate::server::http::state::{
+    AppState, AtRevision, Query, WORKERS, document_at, if_match, meta, tagged,
+};
+use crate::server::storage::db::Meta;
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::State;

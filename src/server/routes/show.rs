@@ -5,13 +5,13 @@
 //! again. `output.png` is the image the channel should put out now, so a player that follows
 //! the feed and fetches it shows what the console sent.
 
-use super::ApiError;
-use super::jobs::{job, run_job};
 use super::outputs::{self, RenderQuery};
-use super::preview::Grid;
-use super::state::{AppState, Query, if_match, parse_body, tagged};
 use crate::content::testcard::{self, Card, Label};
 use crate::image_io::{Compression, png_bytes_with};
+use crate::server::ApiError;
+use crate::server::http::jobs::{job, run_job};
+use crate::server::http::state::{AppState, Query, if_match, parse_body, tagged};
+use crate::server::previews::pattern::Grid;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;

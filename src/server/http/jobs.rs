@@ -2,11 +2,11 @@
 //! it), cancellation when the client goes away, and the channel's computed warp, cached in
 //! memory and kept on disk by a hash of its inputs.
 
-use super::ApiError;
-use super::cache::{Computed, Geometry};
-use super::canvas::Canvas;
 use super::state::AppState;
 use crate::rig::Rig;
+use crate::server::ApiError;
+use crate::server::storage::cache::{Computed, Geometry};
+use crate::server::storage::canvas::Canvas;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 

@@ -1,7 +1,6 @@
 //! Previews: the procedural test pattern through a channel's warp, desaturated by its tiles'
 //! f and attenuated by its blend, on the CPU or the GPU.
 
-use super::cache::{Computed, GpuWarp};
 use crate::content::Content;
 use crate::content::pattern::Pattern;
 use crate::cubemap::CubeMap;
@@ -10,6 +9,7 @@ use crate::raster::{Pixel, Raster};
 use crate::render::coverage::{face_size_for, faces_sampled};
 use crate::render::{self, Filter, Plan, Warp};
 use crate::rig::{apply_gains, signal_gains};
+use crate::server::storage::cache::{Computed, GpuWarp};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};

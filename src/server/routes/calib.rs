@@ -2,13 +2,13 @@
 //! back as a proposal (kept durably, announced on the change feed), and the technician applies
 //! it to the rig with `If-Match` like any other rig edit.
 
-use super::ApiError;
-use super::jobs::run_job;
 use super::rig::commit_rig;
-use super::state::{AppState, if_match, meta, parse_body, tagged};
-use super::store::Proposal;
 use crate::calibration::{CorrespondencesDoc, calibrate_unless};
 use crate::rig::Rig;
+use crate::server::ApiError;
+use crate::server::http::jobs::run_job;
+use crate::server::http::state::{AppState, if_match, meta, parse_body, tagged};
+use crate::server::storage::store::Proposal;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode};

@@ -1,6 +1,7 @@
-//! The virtual projector–camera bench: what a camera of any lens and pose sees when one of the
-//! rig's projectors shows a pattern. It is the ground truth the decoder and the calibration
-//! are measured against, and a technician's rehearsal of a capture before the room is booked.
+//! The capture simulator (the virtual projector–camera bench): what a camera of any lens and
+//! pose sees when one of the rig's projectors shows a pattern. It is the ground truth the decoder
+//! and the calibration are measured against, and a technician's rehearsal of a capture before
+//! the room is booked.
 //!
 //! Light is followed the way it goes, in linear units where the projector's full white lights
 //! the wall with 1:
@@ -39,10 +40,10 @@ use rand_pcg::rand_core::SeedableRng;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
-/// The bench's optics and sensor. [`BenchOptions::default`] is the reference bench:
+/// The bench's optics and sensor. [`SimulatorOptions::default`] is the reference bench:
 /// 0.7 px blur, both gammas 2.2, 5 % ambient, σ = 2 grey levels.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BenchOptions {
+pub struct SimulatorOptions {
     /// Sub-pixels per camera pixel along each axis.
     pub supersample: u32,
     /// Point spread σ, camera pixels (0: none).
@@ -66,9 +67,9 @@ pub struct BenchOptions {
     pub code: super::Code,
 }
 
-impl Default for BenchOptions {
+impl Default for SimulatorOptions {
     fn default() -> Self {
-        BenchOptions {
+        SimulatorOptions {
             supersample: 3,
             blur: 0.7,
             projector_gamma: 2.2,
@@ -85,7 +86,7 @@ impl Default for BenchOptions {
     }
 }
 
-impl BenchOptions {
+impl SimulatorOptions {
     /// Refuses values outside what a camera can be, naming the option.
     pub fn validate(&self) -> Result<()> {
         let check = |name: &str, v: f64, lo: f64, hi: f64| -> Result<()> {
@@ -124,10 +125,10 @@ const BOUNCE_STEP: usize = 16;
 const BOUNCE_PATCHES: u32 = 32;
 
 /// One projector seen by one camera, ready to render captures.
-pub struct Bench {
+pub struct Simulator {
     camera: Channel,
     set: PatternSet,
-    opts: BenchOptions,
+    opts: SimulatorOptions,
     /// s² projector pixel indices (column, row) per camera pixel.
     samples: Vec<[u16; 2]>,
     truth: Vec<Option<[f64; 2]>>,
@@ -144,14 +145,14 @@ struct Bounce {
     patches: Vec<([u32; 2], [u32; 2])>,
 }
 
-impl Bench {
+impl Simulator {
     /// The bench for channel `projector` of `rig` and `camera`. The camera's id is not used.
     pub fn new(
         rig: &Rig,
         projector: &Channel,
         camera: &Channel,
-        opts: BenchOptions,
-    ) -> Result<Bench> {
+        opts: SimulatorOptions,
+    ) -> Result<Simulator> {
         opts.validate()?;
         if projector.width >= u32::from(OFF) || projector.height >= u32::from(OFF) {
             return Err(Error::invalid(
@@ -224,7 +225,7 @@ impl Bench {
                 (1.0 - opts.vignetting * (dx * dx + dy * dy) / corner) as f32
             })
             .collect();
-        let mut bench = Bench {
+        let mut bench = Simulator {
             camera: camera.clone(),
             set,
             opts,
