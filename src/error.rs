@@ -9,7 +9,12 @@ use std::path::PathBuf;
 pub enum Error {
     /// A parameter was missing, non-finite, out of range or inconsistent with another.
     #[error("invalid `{name}`: {reason}")]
-    Invalid { name: String, reason: String },
+    Invalid {
+        /// What was wrong: a parameter, JSON field or pointer, CLI flag, or a format (`png`).
+        name: String,
+        /// Why, in words a user can act on.
+        reason: String,
+    },
     /// A direction or screen position lies outside a projection's domain.
     #[error(transparent)]
     Outside(#[from] Outside),
@@ -21,8 +26,11 @@ pub enum Error {
     /// was one, so callers can tell a missing file from a full disk or a closed pipe.
     #[error("{path}: {reason}")]
     File {
+        /// The file (or directory) that could not be read or written.
         path: PathBuf,
+        /// Why, as text (the operating system's message or a reader's).
         reason: String,
+        /// The operating system's error kind, when the failure came from an I/O call.
         kind: Option<std::io::ErrorKind>,
     },
 }
@@ -70,10 +78,13 @@ impl Error {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 #[error("outside the domain of projection `{projection}`: {reason}")]
 pub struct Outside {
+    /// The projection's name as the CLI and JSON documents spell it (`equirect`, `fisheye`).
     pub projection: &'static str,
+    /// Why the point is outside, e.g. "outside the image circle".
     pub reason: &'static str,
 }
 
+/// The library's result type; the error is [`Error`] unless given.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// Rejects NaN and infinities, naming the parameter.

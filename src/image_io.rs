@@ -10,11 +10,14 @@ use std::path::{Path, PathBuf};
 /// An image as read from disk: 8-bit formats stay 8-bit, EXR is float.
 #[derive(Debug, Clone)]
 pub enum Loaded {
+    /// A PNG or JPEG as 8-bit RGBA, top row first.
     U8(Raster<[u8; 4]>),
+    /// An OpenEXR file as float RGBA (alpha 1 where the file has none), top row first.
     F32(Raster<[f32; 4]>),
 }
 
 impl Loaded {
+    /// The image's width, pixels.
     pub fn width(&self) -> usize {
         match self {
             Loaded::U8(r) => r.width,
@@ -22,6 +25,7 @@ impl Loaded {
         }
     }
 
+    /// The image's height, pixels.
     pub fn height(&self) -> usize {
         match self {
             Loaded::U8(r) => r.height,
@@ -138,13 +142,29 @@ pub fn read_exr_rgba(path: &Path) -> Result<(Raster<[f32; 4]>, Attributes)> {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Step {
     /// The new contents written into a temporary file beside the target.
-    Write { temp: PathBuf, bytes: Vec<u8> },
+    Write {
+        /// The temporary file.
+        temp: PathBuf,
+        /// The bytes written into it.
+        bytes: Vec<u8>,
+    },
     /// The temporary file's contents made durable (fsync).
-    SyncFile { temp: PathBuf },
+    SyncFile {
+        /// The temporary file.
+        temp: PathBuf,
+    },
     /// The temporary file renamed over the target.
-    Rename { temp: PathBuf, to: PathBuf },
+    Rename {
+        /// The temporary file.
+        temp: PathBuf,
+        /// The target it replaces.
+        to: PathBuf,
+    },
     /// The directory made durable, and with it the rename (fsync of the directory).
-    SyncDir { dir: PathBuf },
+    SyncDir {
+        /// The directory holding the target (or a new directory's parent).
+        dir: PathBuf,
+    },
 }
 
 struct Journal {
@@ -275,7 +295,10 @@ pub fn write_png(path: &Path, img: &Raster<[u8; 4]>) -> Result<()> {
 /// Float precision of an EXR file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Precision {
+    /// 32-bit floats: values round-trip bit-exactly.
     Float,
+    /// 16-bit half floats (11 significant bits): smaller files; a warp map's vectors are then
+    /// off by at most about 0.03°.
     Half,
 }
 
@@ -341,17 +364,21 @@ fn encode_exr(
     }
 }
 
-/// An 8-bit RGBA PNG in memory.
 /// How hard a PNG is compressed: previews favour time (`fast` is fdeflate, several times
 /// quicker than `balanced` for files a third larger), files kept on disk favour size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Compression {
+    /// `fast`: fdeflate, the quickest; the default for previews.
     Fast,
+    /// `balanced`: the png crate's balance of time and size.
     Balanced,
+    /// `high`: the smallest files, at much more time than `balanced`.
     High,
 }
 
 impl Compression {
+    /// The level named `fast`, `balanced` or `high` (as the API's `compression` parameter
+    /// spells it); any other name is an error.
     pub fn parse(name: &str) -> Result<Self> {
         match name {
             "fast" => Ok(Compression::Fast),
@@ -387,6 +414,7 @@ pub fn png_bytes_with(img: &Raster<[u8; 4]>, compression: Compression) -> Result
     Ok(out)
 }
 
+/// An 8-bit RGBA PNG in memory, at the `image` crate's default (fast) compression.
 pub fn png_bytes(img: &Raster<[u8; 4]>) -> Result<Vec<u8>> {
     let bytes: Vec<u8> = img.data.iter().flatten().copied().collect();
     let mut out = Vec::new();

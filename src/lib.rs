@@ -4,6 +4,8 @@
 //! [`projection`], cube maps in [`cubemap`], content sources in [`content`], the CPU reference
 //! renderer in [`render`] and the float normal maps (warp maps) in [`normalmap`].
 
+#![warn(missing_docs)]
+
 pub mod calibration;
 pub mod content;
 pub mod cubemap;

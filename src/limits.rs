@@ -17,10 +17,13 @@ pub const WARP_BYTES_PER_PIXEL: u64 = 96;
 pub const MEMORY_BUDGET: u64 = 2 << 30;
 /// Knots of a splined lens model each way, and in all.
 pub const SPLINE_KNOTS_SIDE: u32 = 200;
+/// Knots of a splined lens model in all (columns × rows).
 pub const SPLINE_KNOTS: u64 = 10_000;
 /// Features of a tile grid each way, and in all; triangles of a triangle soup.
 pub const TILE_SIDE: usize = 1025;
+/// Features of a tile grid in all (columns × rows).
 pub const TILE_FEATURES: usize = 16_641;
+/// Triangles of a tile screen's triangle soup.
 pub const TILE_TRIANGLES: usize = 32_768;
 /// Edits in one PATCH.
 pub const EDITS_PER_PATCH: usize = 1000;
@@ -45,6 +48,7 @@ pub const MIN_FOV_DEG: f64 = 0.01;
 pub const ZOOM: (f64, f64) = (1e-3, 1e3);
 /// Largest mesh screen file (and upload), bytes, and its triangles.
 pub const MESH_BYTES: u64 = 64 << 20;
+/// Triangles of a mesh screen (an OBJ file or upload).
 pub const MESH_TRIANGLES: usize = 4_000_000;
 /// Largest camera capture upload (one frame, PNG or JPEG), bytes.
 pub const CAPTURE_BODY: u64 = 64 << 20;

@@ -29,7 +29,6 @@ pub struct NormalMap {
 /// round components by up to 2⁻¹¹ relative).
 const UNIT_TOLERANCE: f32 = 2e-3;
 
-/// What is wrong with a normal-map pixel, if anything.
 /// The first bad pixel of `rows` (`width` wide, the first of them row `top` of the map), as
 /// the reason to report; rows are checked in parallel (a 4K map is 8 million pixels).
 fn first_problem(rows: &[[f32; 4]], width: usize, top: usize) -> Option<String> {
@@ -44,6 +43,7 @@ fn first_problem(rows: &[[f32; 4]], width: usize, top: usize) -> Option<String> 
         })
 }
 
+/// What is wrong with a normal-map pixel, if anything.
 fn pixel_problem(p: &[f32; 4]) -> Option<String> {
     if p.iter().any(|c| !c.is_finite()) {
         return Some(format!("holds a non-finite value {p:?}"));
@@ -146,14 +146,17 @@ impl NormalMap {
         })
     }
 
+    /// The map's width, pixels.
     pub fn width(&self) -> usize {
         self.pixels.width
     }
 
+    /// The map's height, pixels.
     pub fn height(&self) -> usize {
         self.pixels.height
     }
 
+    /// The raw pixels, top row first: R, G, B = V and A the validity (1 shown, 0 not).
     pub fn pixels(&self) -> &Raster<[f32; 4]> {
         &self.pixels
     }
@@ -174,10 +177,14 @@ impl NormalMap {
         i < self.pixels.width && j < self.pixels.height && self.pixels.get(i, j)[3] > 0.5
     }
 
+    /// Writes the map as an OpenEXR file with its attributes, atomically (see
+    /// [`crate::image_io::atomic_write`]).
     pub fn write(&self, path: &Path, precision: Precision) -> Result<()> {
         write_exr_rgba(path, &self.pixels, &self.attributes, precision)
     }
 
+    /// Reads an OpenEXR normal map with its text attributes, checking every pixel as
+    /// [`NormalMap::from_pixels`] does.
     pub fn read(path: &Path) -> Result<Self> {
         let (pixels, attributes) = read_exr_rgba(path)?;
         Self::from_pixels(pixels, attributes).map_err(|e| Error::file(path, e))

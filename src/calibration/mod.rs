@@ -30,7 +30,10 @@ use std::sync::atomic::AtomicBool;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Correspondence {
+    /// Projector pixel (x right, y down), pixel centres at integers: (0, 0) is the centre of the
+    /// top-left pixel.
     pub pixel: [f64; 2],
+    /// The wall point it lights, world coordinates in metres (+y up).
     pub world: [f64; 3],
 }
 
@@ -44,6 +47,7 @@ pub struct CorrespondencesDoc {
     /// channel's and refuses a file made for another size.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resolution: Option<[u32; 2]>,
+    /// The measurements, at most `limits::CALIBRATION_POINTS` (20 000).
     pub points: Vec<Correspondence>,
     /// Known intrinsics (kept with `intrinsics_fixed`) or a seed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -52,6 +56,8 @@ pub struct CorrespondencesDoc {
     /// `auto` when absent. The CLI's `--model` takes precedence.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<String>,
+    /// Keep `lens`'s intrinsics and solve for the pose only (then `lens` is required); false when
+    /// absent.
     #[serde(default)]
     pub intrinsics_fixed: bool,
 }
@@ -119,36 +125,49 @@ impl CorrespondencesDoc {
 /// What the solver is asked.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Problem {
+    /// The projector's width and height in pixels.
     pub resolution: [u32; 2],
+    /// The measurements.
     pub points: Vec<Correspondence>,
     /// Known intrinsics (held fixed) or a seed, with its model.
     pub lens: Option<Lens>,
+    /// Solve for the pose only, keeping `lens`'s intrinsics (which must then be given).
     pub intrinsics_fixed: bool,
 }
 
 /// Model choice: `Auto` tries PINHOLE, OPENCV4, 5, 8 in turn.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ModelChoice {
+    /// PINHOLE, then OPENCV4, 5 and 8, each kept only while the 5-fold cross-validated RMS
+    /// improves by more than 2 %; with fixed intrinsics, the given lens's model alone.
     Auto,
+    /// This model only, without comparison.
     Fixed(LensModel),
 }
 
 /// A considered model and what became of it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Considered {
+    /// The lens model tried.
     pub model: LensModel,
+    /// RMS reprojection error of the inliers under a fit to all points, pixels; NaN where the model
+    /// was not fitted (too few points for its parameters).
     pub rms: f64,
     /// 5-fold cross-validated RMS of held-out points, pixels; only where models were compared
     /// (`ModelChoice::Auto` with free intrinsics).
     pub held_out_rms: Option<f64>,
+    /// Why the model was taken or rejected, in words (e.g. "held-out RMS improved to … px").
     pub verdict: String,
 }
 
 /// The result: the projector, how well it fits, and why this model.
 #[derive(Debug, Clone)]
 pub struct Calibration {
+    /// The chosen model's fit: lens, pose, residuals and parameter uncertainties.
     pub fit: Fit,
+    /// Every model tried, in the order tried, with its verdict.
     pub considered: Vec<Considered>,
+    /// Poorly determined parameters and outlying points, in words ([`Fit::warnings`]).
     pub warnings: Vec<String>,
 }
 

@@ -16,9 +16,11 @@ type D = DualSVec64<LANES>;
 /// A fitted projector.
 #[derive(Debug, Clone)]
 pub struct Fit {
+    /// The fitted lens: model and intrinsics (the given ones where they were held fixed).
     pub lens: Lens,
     /// World → projector: p_cam = R·p + t.
     pub r: DMat3,
+    /// Translation of the world → projector transform (see `r`), metres.
     pub t: DVec3,
     /// 2-D RMS reprojection error of the inliers, pixels.
     pub rms: f64,
@@ -32,6 +34,8 @@ pub struct Fit {
 }
 
 impl Fit {
+    /// The pixel of world point `p` under the fitted pose and lens (pixel centres at integers);
+    /// `None` where the lens has no pixel for it, e.g. behind the projector.
     pub fn reproject(&self, p: DVec3) -> Option<[f64; 2]> {
         self.lens.project(self.r * p + self.t).ok()
     }

@@ -22,7 +22,8 @@ pub struct CalibrateArgs {
     correspondences: Option<PathBuf>,
     /// Instead of --correspondences: a folder of camera captures of the structured-light
     /// sequence (PNG or JPEG, in name order: white, black, then per axis x and y the Gray bits
-    /// each with its inverse and 12 phase steps; `omniwarp bench camera --out` writes one).
+    /// each with its inverse and 12 phase steps; `omniwarp simulate` writes one from its
+    /// virtual camera).
     /// Needs --camera, --rig and --channel.
     #[arg(long, requires_all = ["camera", "rig", "channel"])]
     captures: Option<PathBuf>,

@@ -36,6 +36,11 @@ pub struct ServeArgs {
     /// served elsewhere (repeat for more).
     #[arg(long = "allow-origin", value_name = "ORIGIN")]
     allow_origins: Vec<String>,
+    /// Connections open at once; beyond them a few more are answered for health only (and 503
+    /// otherwise), the rest closed. Change feeds may take at most half (and at most 256).
+    #[arg(long, default_value_t = omniwarp::server::CONNECTIONS as u16,
+          value_parser = clap::value_parser!(u16).range(16..))]
+    max_connections: u16,
     /// A directory mesh screens may be read from, besides the data directory's meshes/.
     #[arg(long)]
     assets: Option<PathBuf>,
@@ -68,6 +73,20 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
         .ok_or_else(|| format!("`{s}` must be positive and below 16 EiB"))
 }
 
+/// A token other local users can read is everyone's on this machine.
+fn warn_if_readable_by_others(path: &std::path::Path) {
+    use std::os::unix::fs::PermissionsExt;
+    if let Ok(m) = std::fs::metadata(path)
+        && m.permissions().mode() & 0o077 != 0
+    {
+        tracing::warn!(
+            file = %path.display(),
+            mode = format!("{:o}", m.permissions().mode() & 0o777),
+            "the token file can be read by other users; chmod 600 it"
+        );
+    }
+}
+
 pub fn run(a: ServeArgs) -> Result<()> {
     // Logs on stderr; stdout carries only the "listening on" line scripts read.
     // Colour codes only for a person at a terminal, not in a log file.
@@ -86,6 +105,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
             if t.len() < 16 {
                 bail!("--token-file: the token must be at least 16 characters");
             }
+            warn_if_readable_by_others(p);
             Some(t)
         }
         None => None,
@@ -127,6 +147,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
                 .as_ref()
                 .and_then(|p| p.file_stem())
                 .map_or("local".into(), |n| n.to_string_lossy().into_owned()),
+            connections: usize::from(a.max_connections),
         },
     );
     let rt = tokio::runtime::Builder::new_multi_thread()

@@ -17,10 +17,15 @@ use glam::DVec3;
 /// Border width: bicubic filtering reads one texel before and two after the sample position.
 pub const PAD: usize = 2;
 
+/// A source's texels with a border of [`PAD`] texels on every side, filled as seamless
+/// filtering would read there (see the module's description).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Atlas<T> {
+    /// Width in texels, border included.
     pub width: usize,
+    /// Height in texels, border included (a cube's six bordered faces are stacked top to bottom).
     pub height: usize,
+    /// The `width × height` texels, row by row from the top.
     pub data: Vec<T>,
 }
 
@@ -49,6 +54,9 @@ impl<T: Pixel> Atlas<T> {
         }
     }
 
+    /// A panorama image with its border: wrapped round from the other side when `wrap` (a full
+    /// 360° panorama), clamped otherwise, and mirrored over the poles when `poles` (a full
+    /// 360° × 180° equirect). An error for images under 2×2 pixels.
     pub fn panorama(image: &Raster<T>, wrap: bool, poles: bool) -> Result<Self> {
         let (w, h) = (image.width as isize, image.height as isize);
         if w < 2 || h < 2 {

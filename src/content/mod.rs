@@ -62,6 +62,8 @@ pub struct Content<T> {
 /// Where a direction falls in the atlas: continuous texel coordinates, integers at texel
 /// centres. `None` where the content does not cover the direction.
 pub trait Locate: Sync {
+    /// The atlas position of world direction `d` (texel centres at integers), or `None` where the
+    /// content does not cover it.
     fn locate(&self, d: DVec3) -> Option<(f64, f64)>;
 
     /// The rectangle [x0, y0, x1, y1] outside which `locate` gives `None`, when the content
@@ -110,6 +112,7 @@ fn panorama_fov(name: &str, deg: f64, max: f64) -> Result<f64> {
 }
 
 impl<T: Pixel> Content<T> {
+    /// A cube map, covering every direction.
     pub fn cube(cube: &CubeMap<T>) -> Self {
         Content {
             atlas: Atlas::cube(cube),
@@ -194,6 +197,7 @@ impl<T: Pixel> Content<T> {
         self
     }
 
+    /// The padded texel array the content is sampled from.
     pub fn atlas(&self) -> &Atlas<T> {
         &self.atlas
     }
@@ -237,6 +241,8 @@ impl<T: Pixel> Content<T> {
         }
     }
 
+    /// The content's orientation in the world (identity unless [`Content::with_orientation`] set
+    /// one).
     pub fn orientation(&self) -> Orientation {
         self.orientation
     }
@@ -352,11 +358,16 @@ pub enum Format {
     CubemapC3x2,
     /// ffmpeg v360's `c6x1`.
     CubemapC6x1,
+    /// An equirectangular panorama: longitude linear across, latitude linear down (360° wide,
+    /// with square pixels, unless a field of view is given).
     Equirect,
+    /// A cylindrical panorama (seed 001): longitude linear across, height on the cylinder linear
+    /// down.
     Cylindrical,
 }
 
 impl Format {
+    /// Every format with its name, as `--content-format` spells it.
     pub const NAMES: [(&'static str, Format); 5] = [
         ("cubemap", Format::Cubemap),
         ("cubemap-c3x2", Format::CubemapC3x2),
@@ -365,6 +376,7 @@ impl Format {
         ("cylindrical", Format::Cylindrical),
     ];
 
+    /// The format of that name (see [`Format::NAMES`]); an error listing the known names otherwise.
     pub fn parse(name: &str) -> Result<Self> {
         Self::NAMES
             .iter()

@@ -39,8 +39,12 @@ impl Receiver for Mesh {
 
 /// A panorama projected from `centre` onto `surface`, seen from `eye`.
 pub struct Projective<'a> {
+    /// The receiving surface: the wall, or a scene's mesh.
     pub surface: &'a dyn Receiver,
+    /// The viewer's position, world coordinates in metres.
     pub eye: DVec3,
+    /// The panorama's projection centre C, world coordinates in metres; C = `eye` shows the plain
+    /// panorama.
     pub centre: DVec3,
 }
 

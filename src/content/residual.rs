@@ -24,6 +24,8 @@ pub const SECTORS: usize = 4;
 /// Table entries along x′ and along y′ (the seed's bump map was 256×256).
 pub const TABLE: usize = 256;
 
+/// Seed 001's lookup of a cylindrical panorama: per direction of projection, a linear part plus
+/// residual tables, in place of an atan2 per sample.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ResidualSplit {
     /// Per sector: the DOP's unit normal and tangent in the horizontal plane, and its azimuth.

@@ -13,16 +13,27 @@ use crate::raster::Raster;
 /// One of the test cards (see the module's description).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Card {
+    /// Lines every 1/32 of the longer side, in projector pixels: whether it is square to the wall.
     Grid,
+    /// Lines of constant content azimuth and elevation every 10°, through the channel's warp:
+    /// whether overlapping projectors' warps agree.
     Crosshatch,
+    /// Colour bars over a grey ramp, in projector pixels: whether colours and black level match
+    /// the neighbours'.
     Bars,
+    /// The channel's number and id on its own colour: which channel a beam is.
     Ids,
+    /// The raster's border, coloured corners and an arrow pointing up: where the raster ends and
+    /// which way up it is.
     Edges,
 }
 
 impl Card {
+    /// Every card's name, as [`Card::parse`] takes it (the `show` field of a channel's show
+    /// request, besides `content`).
     pub const NAMES: [&'static str; 5] = ["grid", "crosshatch", "bars", "ids", "edges"];
 
+    /// The card's name, one of [`Card::NAMES`].
     pub fn name(self) -> &'static str {
         match self {
             Card::Grid => "grid",
@@ -33,6 +44,7 @@ impl Card {
         }
     }
 
+    /// The card of that name; an error listing [`Card::NAMES`] otherwise.
     pub fn parse(name: &str) -> Result<Card> {
         Ok(match name {
             "grid" => Card::Grid,
@@ -52,7 +64,9 @@ impl Card {
 
 /// Which channel a card is drawn for: `ids` writes both, and colours the card by the index.
 pub struct Label<'a> {
+    /// The channel's position in the rig, from 0 (`ids` shows it plus one and colours by it).
     pub index: usize,
+    /// The channel's id, as the rig names it.
     pub id: &'a str,
 }
 

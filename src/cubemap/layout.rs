@@ -13,10 +13,15 @@ use super::{CubeMap, Face};
 use crate::raster::{Pixel, Raster};
 use crate::{Error, Result};
 
+/// How the six faces of a cube map are arranged in one image; every face is N × N pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Layout {
+    /// Six faces side by side (6N × N) in [`Face`] order +X −X +Y −Y +Z −Z, each as the
+    /// cube-map table defines it.
     Strip,
+    /// ffmpeg v360's `c3x2` (3N × 2N): rows r l u / d f b, faces in ffmpeg's orientation.
     FfmpegC3x2,
+    /// ffmpeg v360's `c6x1` (6N × N): r l u d f b, faces in ffmpeg's orientation.
     FfmpegC6x1,
 }
 

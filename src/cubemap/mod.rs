@@ -25,15 +25,22 @@ use glam::DVec3;
 /// The six faces in omniwarp's order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Face {
+    /// +X: the face to the right of a viewer with no orientation.
     PosX = 0,
+    /// −X: the face to the left of a viewer with no orientation.
     NegX = 1,
+    /// +Y: the face straight up (the zenith).
     PosY = 2,
+    /// −Y: the face straight down (the nadir).
     NegY = 3,
+    /// +Z: the face behind a viewer with no orientation.
     PosZ = 4,
+    /// −Z: the face straight ahead of a viewer with no orientation.
     NegZ = 5,
 }
 
 impl Face {
+    /// The six faces in omniwarp's order, so that `Face::ALL[k].index() == k`.
     pub const ALL: [Face; 6] = [
         Face::PosX,
         Face::NegX,
@@ -43,6 +50,7 @@ impl Face {
         Face::NegZ,
     ];
 
+    /// The face's position in [`Face::ALL`] and in [`CubeMap::faces`], 0 to 5.
     pub fn index(self) -> usize {
         self as usize
     }
@@ -100,7 +108,9 @@ pub fn face_point(face: Face, s: f64, t: f64) -> DVec3 {
 /// Six square faces of `size` × `size` texels, in [`Face`] order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CubeMap<T> {
+    /// Width and height of every face in texels.
     pub size: usize,
+    /// The face images, top row first, indexed by [`Face::index`].
     pub faces: [Raster<T>; 6],
 }
 
@@ -170,6 +180,7 @@ impl<T: Pixel> CubeMap<T> {
         CubeMap { size, faces }
     }
 
+    /// The image of `face`.
     pub fn face(&self, face: Face) -> &Raster<T> {
         &self.faces[face.index()]
     }

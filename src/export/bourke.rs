@@ -24,6 +24,7 @@ pub enum MeshReader {
 }
 
 impl MeshReader {
+    /// Every reader, in the order error messages list them.
     pub const ALL: [MeshReader; 4] = [
         MeshReader::Any,
         MeshReader::Bilinear,
@@ -31,6 +32,8 @@ impl MeshReader {
         MeshReader::Sgct,
     ];
 
+    /// The reader's name as `--reader` and the API's `reader` spell it: `any`, `bilinear`,
+    /// `celestia` or `sgct`.
     pub fn name(self) -> &'static str {
         match self {
             MeshReader::Any => "any",
@@ -40,6 +43,7 @@ impl MeshReader {
         }
     }
 
+    /// The reader named `s` (see [`MeshReader::name`]); an error naming `field` otherwise.
     pub fn parse(s: &str, field: &str) -> Result<Self> {
         MeshReader::ALL
             .into_iter()
@@ -52,6 +56,7 @@ impl MeshReader {
             })
     }
 
+    /// How this reader fills a cell between its four nodes, which the grid is sized for.
     pub fn cells(self) -> Cells {
         match self {
             MeshReader::Any => Cells::Any,
@@ -66,8 +71,11 @@ use std::fmt::Write as _;
 /// A mesh as read back.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mesh {
+    /// The mesh type on line 1 (2 for the rectangular meshes omniwarp writes).
     pub kind: u32,
+    /// Nodes across, from line 2.
     pub nx: usize,
+    /// Nodes down, from line 2.
     pub ny: usize,
     /// `[x, y, u, v, i]` per node, in file order (bottom row first).
     pub nodes: Vec<[f64; 5]>,

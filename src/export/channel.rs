@@ -13,8 +13,11 @@ use std::sync::atomic::AtomicBool;
 
 /// What a channel's exports are made from.
 pub struct Sources<'a> {
+    /// The channel's id; it names the MPCDI region.
     pub id: &'a str,
+    /// Projector pixels across; every per-pixel slice is `width` × `height`, rows top first.
     pub width: usize,
+    /// Projector pixels down.
     pub height: usize,
     /// Content (u, v), top-left origin, per pixel, continued past the canvas edges (see
     /// [`super::content_uv_unbounded`]); only [0, 1]² is shown.
@@ -23,6 +26,7 @@ pub struct Sources<'a> {
     pub content_size: [u32; 2],
     /// Wall points, metres, world frame.
     pub points: &'a [Option<DVec3>],
+    /// The eye point, metres: a3 exports store wall points relative to it (P − eye).
     pub eye: DVec3,
     /// Linear blend weights per pixel.
     pub weights: &'a [f32],
@@ -35,6 +39,7 @@ pub struct Sources<'a> {
 pub struct Tolerance(pub f64);
 
 impl Tolerance {
+    /// `v` as a tolerance if it is finite and positive; else an error naming `name`.
     pub fn checked(v: f64, name: &str) -> Result<Self> {
         if v.is_finite() && v > 0.0 {
             Ok(Tolerance(v))

@@ -69,7 +69,9 @@ pub enum Cells {
 /// How a reader reads a grid: where it places the nodes and how it fills the cells.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Reading {
+    /// Where the reader places the nodes on the image.
     pub layout: Layout,
+    /// How the reader fills a cell between four nodes.
     pub cells: Cells,
 }
 
@@ -84,9 +86,13 @@ impl Reading {
 /// A uniform grid of samples, row-major from the top row; `None` where the field has none.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid<const N: usize> {
+    /// Nodes across: the length of a row of `samples`.
     pub columns: usize,
+    /// Nodes down: the number of rows of `samples`.
     pub rows: usize,
+    /// How the grid's reader reads it, which sets where its nodes lie on the image.
     pub reading: Reading,
+    /// The `columns` × `rows` node values: content (u, v) or wall X, Y, Z, metres.
     pub samples: Vec<Option<[f64; N]>>,
 }
 
@@ -330,7 +336,10 @@ impl<const N: usize> Grid<N> {
 /// The chosen grid and its measured worst error.
 #[derive(Debug, Clone)]
 pub struct Chosen<const N: usize> {
+    /// The grid.
     pub grid: Grid<N>,
+    /// Its worst interpolation error over the field's valid pixels, in the units of `scale`
+    /// (content pixels, or millimetres on the wall); infinite if it leaves a pixel uncovered.
     pub max_error: f64,
 }
 

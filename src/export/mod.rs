@@ -31,6 +31,7 @@ pub fn content_uv(map: &NormalMap, canvas: &View) -> Vec<Option<[f64; 2]>> {
         .collect()
 }
 
+/// Whether content coordinates (u, v) lie on the content image, [0, 1]² edges included.
 pub fn inside([u, v]: [f64; 2]) -> bool {
     (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)
 }
@@ -65,6 +66,8 @@ pub fn stmap(uv: &[Option<[f64; 2]>], width: usize, height: usize) -> Raster<[f3
     }
 }
 
+/// Writes the [`stmap`] of `uv` (a `width` × `height` grid, rows top to bottom) as a 32-bit
+/// float EXR, with the attribute `omniwarp.export` saying the origin is bottom-left.
 pub fn write_stmap(
     path: &Path,
     uv: &[Option<[f64; 2]>],
@@ -101,6 +104,7 @@ pub fn pfm_bytes(width: usize, height: usize, rows_top_down: &[[f32; 3]]) -> Res
     Ok(bytes)
 }
 
+/// Writes [`pfm_bytes`] to `path`, atomically.
 pub fn write_pfm(
     path: &Path,
     width: usize,

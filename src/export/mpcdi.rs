@@ -19,6 +19,7 @@ use super::grid::{Cells, Layout, Reading};
 use crate::error::{Error, Result};
 use std::io::{Cursor, Read, Write};
 
+/// A package's MPCDI profile: what its warp samples hold.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Profile {
     /// Normalised content (x, y) per sample (top-left origin), B = NaN (no error estimate).
@@ -28,6 +29,8 @@ pub enum Profile {
 }
 
 impl Profile {
+    /// The name written in the root's `profile` attribute and taken by the daemon's `profile=`:
+    /// `2d` or `a3`.
     pub fn name(self) -> &'static str {
         match self {
             Profile::TwoD => "2d",
@@ -36,13 +39,19 @@ impl Profile {
     }
 }
 
+/// The MPCDI version a package is written in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Version {
+    /// MPCDI v1.0 (`version="1.0"`): what WATCHOUT reads.
     V1,
+    /// MPCDI v2.0 (`version="2.0"`, with `geometry="1"` and `color="1"`): the default for every
+    /// other reader.
     V2,
 }
 
 impl Version {
+    /// The version spelled `1.0` or `2.0` (`--mpcdi-version`, the daemon's `version=`); an
+    /// error naming `field` otherwise.
     pub fn parse(s: &str, field: &str) -> Result<Self> {
         match s {
             "1.0" => Ok(Version::V1),
@@ -78,6 +87,7 @@ pub enum Reader {
 }
 
 impl Reader {
+    /// Every reader, in the order error messages list them.
     pub const ALL: [Reader; 5] = [
         Reader::Vesa,
         Reader::Ndisplay,
@@ -86,6 +96,8 @@ impl Reader {
         Reader::Sgct,
     ];
 
+    /// The reader's name as `--reader` and the daemon's `reader=` spell it: `vesa`,
+    /// `ndisplay`, `watchout`, `pympcdi` or `sgct`.
     pub fn name(self) -> &'static str {
         match self {
             Reader::Vesa => "vesa",
@@ -96,6 +108,7 @@ impl Reader {
         }
     }
 
+    /// The reader named `s` (see [`Reader::name`]); an error naming `field` otherwise.
     pub fn parse(s: &str, field: &str) -> Result<Self> {
         Reader::ALL
             .into_iter()
@@ -148,7 +161,10 @@ impl Reader {
 /// One projector's region as written.
 #[derive(Debug, Clone)]
 pub struct Region {
+    /// The region's id, the channel's: it also names the region's files
+    /// (`GeometryWarpFile-{id}.pfm`, `AlphaMap-{id}.png`).
     pub id: String,
+    /// The projector's width and height, pixels (`Xresolution`, `Yresolution`).
     pub resolution: [u32; 2],
     /// Index of its buffer in [`Header::buffers`].
     pub buffer: usize,
@@ -207,13 +223,17 @@ fn date(unix: u64) -> String {
 /// What a package says beside its regions.
 #[derive(Debug, Clone)]
 pub struct Header {
+    /// The MPCDI version the package is written in.
     pub version: Version,
+    /// The package's profile: content coordinates (2d) or wall points (a3).
     pub profile: Profile,
     /// Whose conventions the 2d warps follow (a3 warps are wall points, read alike by all).
     pub reader: Reader,
     /// The buffers' pixel sizes: one per content canvas the channels play (2d) or the
     /// projectors side by side (a3, see [`side_by_side`]).
     pub buffers: Vec<[u32; 2]>,
+    /// When the package was made, seconds since the Unix epoch; written as the root's `date`
+    /// (`yyyy-MM-dd HH:mm:ss`, UTC).
     pub unix_time: u64,
 }
 
@@ -325,33 +345,50 @@ pub fn package(h: &Header, regions: &[Region]) -> Result<Vec<u8>> {
 pub struct Package {
     /// The root element's attributes as written (any case), e.g. `version`, `profile`, `level`.
     pub root: Vec<(String, String)>,
+    /// The text of `mpcdi.xml`.
     pub xml: String,
+    /// The buffers of every `<display>`, in document order.
     pub buffers: Vec<BufferRead>,
 }
 
+/// A buffer of a package as read back.
 #[derive(Debug, Clone)]
 pub struct BufferRead {
+    /// The buffer's `id` attribute (empty if it has none), e.g. `buffer0`.
     pub id: String,
+    /// The buffer's `Xresolution` and `Yresolution`, pixels.
     pub resolution: [u32; 2],
+    /// The buffer's regions, in document order.
     pub regions: Vec<RegionRead>,
 }
 
+/// A region of a package as read back, with its fileset's warp and alpha map.
 #[derive(Debug, Clone)]
 pub struct RegionRead {
+    /// The region's `id` attribute, which its fileset's `region` matches.
     pub id: String,
     /// x, y, xsize, ysize, normalised to the buffer.
     pub rect: [f64; 4],
+    /// The region's `Xresolution` and `Yresolution`: the projector's size, pixels.
     pub resolution: [u32; 2],
+    /// The warp file's `<interpolation>` text (`linear` as written here); empty if absent.
     pub interpolation: String,
+    /// The warp file's `<geometricUnit>` text (`m` for a3, `unknown` for 2d); empty if absent.
     pub geometric_unit: String,
+    /// The warp file's `<originOf3DData>` text (`idealEyePoint` for a3, `unknown` for 2d);
+    /// empty if absent.
     pub origin_of_3d_data: String,
+    /// The warp PFM: columns, rows and samples, rows top to bottom as netpbm orders them (a
+    /// package written for a top-first reader comes back upside down).
     pub warp: (usize, usize, Vec<[f32; 3]>),
     /// Alpha in 0–1 as stored (gamma embedded), row-major.
     pub alpha: (u32, u32, Vec<f64>),
+    /// The alpha map's `<gammaEmbedded>`; 1 if absent or not a number.
     pub gamma_embedded: f64,
 }
 
 impl Package {
+    /// The value of the root element's attribute `name`, in any letter case.
     pub fn attr(&self, name: &str) -> Option<&str> {
         self.root
             .iter()

@@ -6,6 +6,8 @@ use super::{BLUR_WGSL, Gpu};
 use crate::render::blur::Blur;
 use wgpu::util::DeviceExt;
 
+/// The GPU radial-blur pass: the pipeline, bind-group layout and clamping bilinear sampler
+/// of `shaders/blur.wgsl`, built once and reused for every frame.
 pub struct BlurPass {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
@@ -13,6 +15,7 @@ pub struct BlurPass {
 }
 
 impl BlurPass {
+    /// Builds the pipeline on `gpu`.
     pub fn new(gpu: &Gpu) -> Self {
         use wgpu::TextureViewDimension as D;
         let layout = gpu

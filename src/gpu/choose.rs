@@ -17,13 +17,19 @@ use std::time::Instant;
 /// A method at a setting.
 #[derive(Debug, Clone)]
 pub enum Method {
-    Cube { face: u32 },
+    /// A cube map of `face` × `face` texels a face.
+    Cube {
+        /// Width and height of each cube face in texels (a multiple of 16, at least 64).
+        face: u32,
+    },
+    /// Piecewise perspective projection with these pieces.
     Ppp(Pieces),
 }
 
 /// One candidate the chooser weighed.
 #[derive(Debug, Clone)]
 pub struct Candidate {
+    /// The method and its setting.
     pub method: Method,
     /// Its worst sampling error, radians.
     pub angle: f64,
@@ -32,6 +38,8 @@ pub struct Candidate {
 }
 
 impl Candidate {
+    /// A one-line description for people, e.g. `cube map 1024²` or
+    /// `ppp 16×8 cells (128 pieces)`.
     pub fn describe(&self) -> String {
         match &self.method {
             Method::Cube { face } => format!("cube map {face}²"),

@@ -51,6 +51,8 @@ pub fn face_matrix(face: Face, eye: glam::Vec3) -> Mat4 {
     Mat4::from_cols(rows[0], rows[1], rows[2], rows[3]).transpose() * Mat4::from_translation(-eye)
 }
 
+/// The cube-map pass of one scene: its pipeline, the scene's vertex and index buffers on the
+/// GPU, and what the target cube map shows now (for the look-to check).
 pub struct CubePass {
     module: wgpu::ShaderModule,
     pipeline: wgpu::RenderPipeline,
@@ -70,6 +72,7 @@ pub struct CubePass {
 }
 
 impl CubePass {
+    /// Uploads `scene`'s geometry and builds the pipeline; the scene shows its own colours.
     pub fn new(gpu: &Gpu, scene: &Scene) -> Self {
         let module = gpu
             .device

@@ -21,21 +21,28 @@ use crate::scene::replicate::replicate;
 use crate::scene::{Projected, RayCaster, Scene};
 use glam::DVec3;
 
+/// How to draw a frame of a scene: output size, cube-map settings, blur and eye.
 #[derive(Debug, Clone, Copy)]
 pub struct FrameOptions {
+    /// Output width and height in pixels (a warp map's size must match).
     pub size: (u32, u32),
     /// Cube face size; `None` picks it from the output ([`face_size_for`]).
     pub face: Option<u32>,
     /// Render only the faces the warp samples (seed 000's CMF).
     pub cmf: bool,
+    /// Seed 000's radial blur applied to the finished frame, or none.
     pub blur: Option<Blur>,
+    /// The eye (centre of projection) in world coordinates, metres.
     pub eye: DVec3,
 }
 
 /// What a frame did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameReport {
+    /// The cube face size used, in texels a side.
     pub face: u32,
+    /// The faces the cube map covers for this frame, in [`crate::cubemap::Face`] order (all six
+    /// without CMF).
     pub faces: [bool; 6],
     /// False when the look-to check found the cube map already current.
     pub cube_updated: bool,
@@ -66,6 +73,8 @@ type CpuCube = (
 /// Face size and faces decided for a view (they change only with the view).
 type Plan = (Option<Vec<u8>>, Option<u32>, bool, (u32, [bool; 6]));
 
+/// Draws frames of one scene through views or warp maps, on the GPU when there is one and
+/// on the CPU twin otherwise, keeping the cube map between frames (the look-to check).
 pub struct SceneRenderer {
     backend: Backend,
     plan: Option<Plan>,
@@ -79,6 +88,7 @@ pub struct SceneRenderer {
 /// What a piecewise perspective frame did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PppReport {
+    /// Number of perspective pieces the frame was cut into.
     pub pieces: usize,
     /// Triangles drawn (once per piece) over the scene's triangles; `None` on the CPU, whose
     /// twin casts rays instead.
@@ -387,6 +397,8 @@ impl SceneRenderer {
         })
     }
 
+    /// A frame through `view` by the cube-map method: the cube map (redrawn only when the eye,
+    /// face size or faces changed), then the warp pass and the optional blur.
     pub fn frame(
         &mut self,
         view: &View,

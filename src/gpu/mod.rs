@@ -68,8 +68,11 @@ pub fn shader_modules() -> [(&'static str, String); 4] {
 
 /// A device and its queue, with what was chosen.
 pub struct Gpu {
+    /// The logical device, with downlevel default limits raised to the adapter's resolution.
     pub device: wgpu::Device,
+    /// The device's command queue.
     pub queue: wgpu::Queue,
+    /// The chosen adapter: name, backend and device type.
     pub info: wgpu::AdapterInfo,
 }
 
@@ -143,6 +146,7 @@ impl Gpu {
         }))
     }
 
+    /// The adapter for people: its name, then its backend and device type in brackets.
     pub fn describe(&self) -> String {
         format!(
             "{} ({:?}, {:?})",
@@ -162,7 +166,9 @@ impl Gpu {
 /// Which renderer a command uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Renderer {
+    /// A GPU adapter (lavapipe counts); an error when there is none.
     Gpu,
+    /// The CPU renderer, even when a GPU exists.
     Cpu,
     /// The GPU when an adapter exists, else the CPU (said once in the log).
     Auto,

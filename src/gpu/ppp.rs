@@ -57,6 +57,8 @@ fn piece_matrix(piece: &Piece, eye: DVec3, width: u32, height: u32) -> DMat4 {
 /// Samples a pixel when the pass antialiases (`render`'s `msaa`).
 pub const MSAA: u32 = 4;
 
+/// The piecewise perspective pass of one scene: its pipelines (single-sampled and
+/// [`MSAA`]) and the scene's vertex buffers on the GPU.
 pub struct PppPass {
     pipeline: wgpu::RenderPipeline,
     /// The same with [`MSAA`] samples a pixel.
@@ -69,6 +71,7 @@ pub struct PppPass {
 }
 
 impl PppPass {
+    /// Uploads `scene`'s vertices and builds both pipelines.
     pub fn new(gpu: &Gpu, scene: &Scene) -> Self {
         let module = gpu
             .device

@@ -26,6 +26,8 @@ pub struct ProjectionUniform {
 }
 
 impl ProjectionUniform {
+    /// The uniform that evaluates `view` in WGSL for a `width` × `height` output: the
+    /// projection's shader form, the view transform's C, off-axis vector O and zoom.
     pub fn of(view: &View, width: u32, height: u32) -> Self {
         let form = view.projection().shader_form();
         let (c, o, zoom) = view.parts();
@@ -46,14 +48,20 @@ impl ProjectionUniform {
 /// Where the sampling vectors come from.
 #[derive(Clone, Copy)]
 pub enum Source<'a> {
+    /// A view's analytic δP and view transform, evaluated in the shader at each pixel centre.
     View(&'a View),
+    /// A float normal map (warp map) of the output's size, read per pixel; alpha below 0.5
+    /// leaves the pixel transparent.
     Map(&'a NormalMap),
 }
 
 /// A cube map on the GPU: six RGBA8 layers, +X −X +Y −Y +Z −Z.
 pub struct CubeTexture {
+    /// The texture: `size` × `size` × 6 layers, `Rgba8Unorm`, renderable and copyable.
     pub texture: wgpu::Texture,
+    /// A `Cube` view of the texture, for sampling.
     pub view: wgpu::TextureView,
+    /// Width and height of each face in texels.
     pub size: u32,
 }
 
@@ -122,6 +130,8 @@ impl CubeTexture {
     }
 }
 
+/// The warp pass: its full-screen pipeline, its bilinear cube sampler and the blur pass that
+/// follows it; built once per device and reused for every frame.
 pub struct WarpPass {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
@@ -160,6 +170,7 @@ fn float_texture(gpu: &Gpu, w: u32, h: u32, data: &[f32], channels: u32) -> wgpu
 }
 
 impl WarpPass {
+    /// Builds the pipeline (the projections prepended to the warp shader) and the blur pass.
     pub fn new(gpu: &Gpu) -> Self {
         use wgpu::TextureViewDimension as D;
         let layout = gpu

@@ -17,6 +17,7 @@ const DIST_KEYS: [&str; 4] = ["distCoeffs", "dist_coeffs", "distortion_coefficie
 /// A lens with what mrcal's files carry beside it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraModel {
+    /// The lens: model and intrinsics.
     pub lens: Lens,
     /// Width and height in pixels.
     pub imager_size: Option<[u32; 2]>,

@@ -50,6 +50,7 @@ type Grad = DualSVec64<LANES>;
 /// Projection with its derivatives.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Projected {
+    /// The pixel (x right, y down, pixel centres at integers).
     pub q: [f64; 2],
     /// ∂q/∂p, rows u and v.
     pub dq_dp: [[f64; 3]; 2],
@@ -108,10 +109,13 @@ impl Lens {
         })
     }
 
+    /// The lens model.
     pub fn model(&self) -> LensModel {
         self.model
     }
 
+    /// The intrinsics in the model's order: fx, fy, cx, cy, then the model's own
+    /// ([`LensModel::intrinsics_names`]).
     pub fn intrinsics(&self) -> &[f64] {
         &self.intrinsics
     }
@@ -225,6 +229,7 @@ impl Lens {
         }
     }
 
+    /// [`Lens::project`] of each point, in order.
     pub fn project_batch(&self, points: &[DVec3]) -> Vec<std::result::Result<[f64; 2], NoImage>> {
         points.iter().map(|p| self.project(*p)).collect()
     }
@@ -365,6 +370,7 @@ impl Lens {
         Ok(ray)
     }
 
+    /// [`Lens::unproject`] of each pixel, in order.
     pub fn unproject_batch(&self, pixels: &[[f64; 2]]) -> Vec<std::result::Result<DVec3, NoImage>> {
         pixels.iter().map(|q| self.unproject(*q)).collect()
     }

@@ -12,18 +12,34 @@ use std::str::FromStr;
 /// A lens model: family plus configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LensModel {
+    /// `LENSMODEL_PINHOLE`: no distortion; points in front of the camera (z > 0) only.
     Pinhole,
     /// OpenCV's pinhole with 4, 5, 8, 12 or 14 distortion coefficients.
     OpenCv(u8),
+    /// `LENSMODEL_OPENCV_FISHEYE`: OpenCV's Kannala–Brandt fisheye (k1..k4), rays under 90° from
+    /// the axis only.
     OpenCvFisheye,
+    /// `LENSMODEL_STEREOGRAPHIC`: mrcal's stereographic projection; every direction but straight
+    /// behind.
     Stereographic,
+    /// `LENSMODEL_LONLAT`: mrcal's equirectangular, longitude across and latitude down, focal
+    /// lengths in pixels per radian.
     LonLat,
+    /// `LENSMODEL_LATLON`: mrcal's transverse equirectangular, latitude across and longitude down.
     LatLon,
+    /// `LENSMODEL_CAHVOR`: mrcal's CAHVOR, a pinhole with radial distortion about a tilted axis
+    /// (α, β, r0, r1, r2).
     Cahvor,
+    /// `LENSMODEL_SPLINED_STEREOGRAPHIC_order=O_Nx=NX_Ny=NY_fov_x_deg=F`: mrcal's stereographic
+    /// projection plus a B-spline correction over an NX × NY knot grid.
     SplinedStereographic {
+        /// Spline order: 2 (quadratic) or 3 (cubic).
         order: u32,
+        /// Knots across (`Nx`), at least 2.
         nx: u32,
+        /// Knots down (`Ny`), at least 2.
         ny: u32,
+        /// Horizontal field of view the knot grid spans, whole degrees, 1–359.
         fov_x_deg: u32,
     },
 }
@@ -58,6 +74,7 @@ impl LensModel {
         }
     }
 
+    /// What the model can do.
     pub fn meta(&self) -> Meta {
         let (behind, closed, supported) = match self {
             LensModel::Pinhole => (false, true, true),

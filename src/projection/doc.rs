@@ -13,15 +13,26 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ViewDoc {
+    /// The projection's name or alias: `flat`, `cylindrical`, `equirect`, `fisheye`, `domemaster`,
+    /// … (see [`crate::projection::REGISTRY`]).
     pub projection: String,
+    /// Its parameters, angles in degrees; one the projection does not take is refused. All
+    /// unset when absent.
     #[serde(default)]
     pub params: Params,
+    /// Look-to LT, [x, y, z], any non-zero length: where the projection's forward (−z) points in
+    /// the world. [0, 0, −1] when absent.
     #[serde(default = "super::view::default_look_to")]
     pub look_to: [f64; 3],
+    /// Look-up LU, [x, y, z]: the view's up, not parallel to `look_to` (need not be perpendicular
+    /// to it). [0, 1, 0] when absent.
     #[serde(default = "super::view::default_look_up")]
     pub look_up: [f64; 3],
+    /// Off-axis vector O of the seeds, [x, y, z], shorter than 1; zero when absent.
     #[serde(default)]
     pub offaxis: [f64; 3],
+    /// Scale of the screen coordinates before δP (V = C·δP(F·zoom) − O): above 1 shows more of the
+    /// projection, below 1 less; 0.001–1000, 1 when absent.
     #[serde(default = "one")]
     pub zoom: f64,
 }
@@ -88,15 +99,26 @@ macro_rules! view_document {
         #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
         #[serde(deny_unknown_fields)]
         pub struct $name {
+            /// The projection's name or alias: `flat`, `cylindrical`, `equirect`, `fisheye`,
+            /// `domemaster`, … (see [`crate::projection::REGISTRY`]).
             pub projection: String,
+            /// Its parameters, angles in degrees; one the projection does not take is refused.
+            /// All unset when absent.
             #[serde(default)]
             pub params: crate::projection::Params,
+            /// Look-to LT, [x, y, z], any non-zero length: where the projection's forward (−z)
+            /// points in the world. [0, 0, −1] when absent.
             #[serde(default = "crate::projection::view::default_look_to")]
             pub look_to: [f64; 3],
+            /// Look-up LU, [x, y, z]: the view's up, not parallel to `look_to` (need not be
+            /// perpendicular to it). [0, 1, 0] when absent.
             #[serde(default = "crate::projection::view::default_look_up")]
             pub look_up: [f64; 3],
+            /// Off-axis vector O of the seeds, [x, y, z], shorter than 1; zero when absent.
             #[serde(default)]
             pub offaxis: [f64; 3],
+            /// Scale of the screen coordinates before δP (V = C·δP(F·zoom) − O): above 1 shows
+            /// more of the projection, below 1 less; 0.001–1000, 1 when absent.
             #[serde(default = "crate::projection::doc::one")]
             pub zoom: f64,
             $($(#[$fm])* pub $field: $ty,)*

@@ -46,9 +46,16 @@ pub trait Projection: Debug + Send + Sync {
 /// order, as the Rust struct) and a rotation applied after it (the domemaster's turn).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShaderForm {
+    /// The formula: 0 flat, 1 cylindrical, 2 cylindrical-vertical, 3 equirect, 4 the fisheye
+    /// family.
     pub kind: u32,
+    /// The fisheye family's radial law: 0 equidistant, 1 equisolid, 2 stereographic,
+    /// 3 orthographic; 0 for the other formulas.
     pub radial: u32,
+    /// The formula's constants (angles in radians), the projection struct's fields in order;
+    /// unused ones 0.
     pub p: [f64; 4],
+    /// Rotation applied to δP's direction after the formula: the domemaster's turn, else identity.
     pub turn: glam::DMat3,
 }
 
@@ -82,10 +89,13 @@ pub struct Params {
     /// Off-axis frustum edges as angles from the view axis, degrees (left and bottom negative).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub left: Option<f64>,
+    /// Off-axis frustum: angle of the right edge from the view axis, degrees (left < right < 90).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub right: Option<f64>,
+    /// Off-axis frustum: angle of the bottom edge from the view axis, degrees (−90 < bottom < top).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bottom: Option<f64>,
+    /// Off-axis frustum: angle of the top edge from the view axis, degrees (bottom < top < 90).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub top: Option<f64>,
 }
@@ -109,9 +119,11 @@ impl Params {
 
 /// One registry row: everything there is to know about a projection in one place.
 pub struct Entry {
+    /// The projection's name, as `--projection` and a document's `projection` field take it.
     pub name: &'static str,
     /// Other names accepted for it (ffmpeg v360's where they differ).
     pub aliases: &'static [&'static str],
+    /// What the projection is, in one line (`omniwarp projections` lists it).
     pub description: &'static str,
     /// The parameters it takes, with their meaning; all in degrees.
     pub params: &'static [(&'static str, &'static str)],

@@ -76,6 +76,7 @@ impl Orientation {
         self.0
     }
 
+    /// C·d: a direction `d` of the local (view or content) frame, in the world.
     #[inline]
     pub fn apply(&self, d: DVec3) -> DVec3 {
         self.0 * d
@@ -100,6 +101,8 @@ pub struct View {
 }
 
 impl View {
+    /// The view of `projection` through orientation C, off-axis vector O (|O| < 1) and `zoom`
+    /// (0.001–1000); errors name `offaxis` or `zoom`.
     pub fn new(
         projection: Box<dyn Projection>,
         orientation: Orientation,
@@ -142,6 +145,7 @@ impl View {
         }
     }
 
+    /// The projection δP alone, without the view transform.
     pub fn projection(&self) -> &dyn Projection {
         self.projection.as_ref()
     }

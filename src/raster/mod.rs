@@ -32,8 +32,13 @@ use crate::error::{Error, Result};
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(C)]
 pub struct Tap {
+    /// Index into the atlas data (row-major) of the texel at or before the sample (the
+    /// top-left of a bilinear 2×2; with nearest filtering, the nearest texel and zero
+    /// fractions); `u32::MAX` ([`Tap::NONE`]) when the content does not cover the sample.
     pub idx: u32,
+    /// Fraction of a texel to the right of `idx`, in 1/65536.
     pub fx: u16,
+    /// Fraction of a texel below `idx`, in 1/65536.
     pub fy: u16,
 }
 
@@ -92,6 +97,7 @@ pub fn check_size(width: u32, height: u32, supersample: u32) -> Result<()> {
 /// A pixel the renderer can filter. Values stay in the type's own scale (0–255 for 8-bit), so
 /// filtering needs no conversion beyond to and from `f32`.
 pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 'static {
+    /// The four channels R, G, B, A as `f32`, in the type's own scale (0–255 for 8-bit).
     fn to_f32(self) -> [f32; 4];
     /// Rounds and clamps where the type needs it.
     fn from_f32(v: [f32; 4]) -> Self;
@@ -193,12 +199,16 @@ pub(crate) fn bilinear_span_portable<T: Pixel>(
 /// A width × height image, row-major, top row first.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Raster<T> {
+    /// Pixels across.
     pub width: usize,
+    /// Pixels down.
     pub height: usize,
+    /// The `width` × `height` pixels, row-major, top row first: (x, y) is at `y * width + x`.
     pub data: Vec<T>,
 }
 
 impl<T: Pixel> Raster<T> {
+    /// A `width` × `height` image of default pixels (transparent black).
     pub fn new(width: usize, height: usize) -> Self {
         Raster {
             width,
@@ -207,6 +217,8 @@ impl<T: Pixel> Raster<T> {
         }
     }
 
+    /// A `width` × `height` image whose pixel (x, y) is `f(x, y)`, called row by row from the
+    /// top.
     pub fn from_fn(width: usize, height: usize, mut f: impl FnMut(usize, usize) -> T) -> Self {
         let mut data = Vec::with_capacity(width * height);
         for y in 0..height {
@@ -221,6 +233,7 @@ impl<T: Pixel> Raster<T> {
         }
     }
 
+    /// The pixel at column `x`, row `y` (0 is the top row); `x` must be below `width`.
     #[inline]
     pub fn get(&self, x: usize, y: usize) -> T {
         self.data[y * self.width + x]
@@ -252,6 +265,7 @@ impl<T: Pixel> Raster<T> {
         })
     }
 
+    /// This image with `f` applied to every pixel, e.g. to convert the pixel type.
     pub fn map<U: Pixel>(&self, f: impl Fn(T) -> U) -> Raster<U> {
         Raster {
             width: self.width,

@@ -8,7 +8,10 @@ use rayon::prelude::*;
 /// reaches, over `samples` taps.
 #[derive(Debug, Clone, Copy)]
 pub struct Blur {
+    /// Fraction of the way from each pixel to the image centre the taps spread over, usually
+    /// in [0, 1]; 0 leaves the image unchanged.
     pub strength: f32,
+    /// Number of bilinear taps averaged per pixel; 0 counts as 1.
     pub samples: u32,
 }
 

@@ -28,7 +28,9 @@ use rayon::prelude::*;
 /// How content texels are filtered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Filter {
+    /// The texel nearest each sample, chosen once when the plan is built.
     Nearest,
+    /// Bilinear over the 2×2 texels around each sample.
     Bilinear,
     /// Catmull–Rom (Keys, a = −0.5) over 4×4 texels.
     Bicubic,

@@ -291,10 +291,12 @@ impl Plan {
             });
     }
 
+    /// Output width in pixels.
     pub fn width(&self) -> usize {
         self.width
     }
 
+    /// Output height in pixels.
     pub fn height(&self) -> usize {
         self.height
     }

@@ -17,8 +17,11 @@ use rayon::prelude::*;
 use std::io::Write;
 use std::path::Path;
 
+/// How a blend mask is encoded as a PNG.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BlendOptions {
+    /// The projector's gamma γ; the mask stores m = w^(1/γ). Positive, 2.2 by default; 1 is
+    /// linear.
     pub gamma: f64,
     /// 8 or 16 bits a sample (MPCDI readers commonly decode 8 only).
     pub bits: u8,

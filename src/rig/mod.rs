@@ -31,12 +31,17 @@ pub const DEMO_RIG: &str = include_str!("../../calibration/rigs/cylinder-270-3pr
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RigDoc {
+    /// The document's format version; only 1 is known.
     pub format: u32,
+    /// The wall the projectors light.
     pub screen: Screen,
     /// The sweet spot the content is computed for, metres.
     pub eye: [f64; 3],
+    /// The content's orientation and off-axis vector; left out, the identity and no offset.
     #[serde(default)]
     pub content: ContentDoc,
+    /// The projectors, one channel each; at least one, at most
+    /// [`crate::limits::CHANNELS`], with distinct ids.
     pub channels: Vec<ChannelDoc>,
 }
 
@@ -61,10 +66,16 @@ impl RigDoc {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ContentDoc {
+    /// The content direction seen straight ahead of the eye (world −z); any non-zero length,
+    /// (0, 0, −1) by default.
     #[serde(default = "crate::projection::view::default_look_to")]
     pub look_to: [f64; 3],
+    /// The content direction seen straight up (world +y), made perpendicular to `look_to`;
+    /// not parallel to it, (0, 1, 0) by default.
     #[serde(default = "crate::projection::view::default_look_up")]
     pub look_up: [f64; 3],
+    /// The off-axis vector O subtracted before normalising (seed 000, section 3); its length
+    /// must be below 1, zero by default.
     #[serde(default)]
     pub offaxis: [f64; 3],
 }
@@ -79,32 +90,49 @@ impl Default for ContentDoc {
     }
 }
 
+/// One projector channel as the rig file writes it (an element of `channels`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelDoc {
+    /// The channel's name, unique in the rig: 1–64 ASCII letters, digits, '-', '_' or '.',
+    /// not starting with '.' (it names files, URL segments and MPCDI regions).
     pub id: String,
     /// Width and height in pixels.
     pub resolution: [u32; 2],
+    /// The projector's lens model and intrinsics.
     pub lens: LensDoc,
+    /// Where the projector is and where it points (projector-to-world).
     pub pose: PoseDoc,
 }
 
+/// A lens as the rig file writes it (a channel's `lens`); docs/lens-models.md has the models.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LensDoc {
     /// mrcal's model name, e.g. `LENSMODEL_OPENCV5`.
     pub model: String,
+    /// The model's intrinsics in mrcal's (and OpenCV's) order: fx, fy, cx, cy in pixels, then
+    /// the distortion parameters; (cx, cy) counts from the centre of the top-left pixel.
     pub intrinsics: Vec<f64>,
 }
 
+/// A projector's pose as the rig file writes it: the projector-to-world transform, given by
+/// `position` and either `look_to` and `look_up` or `rvec`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PoseDoc {
+    /// The projector's centre of projection in the world, metres.
     pub position: [f64; 3],
+    /// The world direction of the projector's optical axis (its frame's +z); any non-zero
+    /// length. Given with `look_up`, never with `rvec`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub look_to: Option<[f64; 3]>,
+    /// The world direction that is up in the projected image (its frame's −y, made
+    /// perpendicular to `look_to`); not parallel to `look_to`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub look_up: Option<[f64; 3]>,
+    /// The projector-to-world rotation as a Rodrigues vector (axis × angle, radians), in place
+    /// of `look_to` and `look_up`; OpenCV's `solvePnP` returns the inverse.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rvec: Option<[f64; 3]>,
 }
@@ -112,10 +140,15 @@ pub struct PoseDoc {
 /// A validated channel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Channel {
+    /// The channel's id, unique in the rig.
     pub id: String,
+    /// Projector pixels across, 1 to [`crate::limits::CHANNEL_SIDE`].
     pub width: u32,
+    /// Projector pixels down, 1 to [`crate::limits::CHANNEL_SIDE`].
     pub height: u32,
+    /// The projector's lens: projector frame ↔ pixel (OpenCV frame, pixel centres at integers).
     pub lens: Lens,
+    /// The projector's centre of projection in the world, metres.
     pub position: DVec3,
     /// Projector frame to world.
     pub rotation: DMat3,
@@ -200,10 +233,15 @@ impl Channel {
 /// A validated rig.
 #[derive(Debug, Clone)]
 pub struct Rig {
+    /// The document the rig was validated from, a mesh screen's OBJ loaded.
     pub doc: RigDoc,
+    /// The eye point the content is computed for, metres.
     pub eye: DVec3,
+    /// The content orientation C, from the document's `content.look_to` and `look_up`.
     pub content: Orientation,
+    /// The off-axis vector O, from `content.offaxis`; shorter than 1.
     pub offaxis: DVec3,
+    /// The validated channels, in the document's order.
     pub channels: Vec<Channel>,
 }
 
@@ -238,12 +276,16 @@ impl Rig {
         Rig::from_doc(doc)
     }
 
+    /// Reads, parses and validates a rig file; mesh paths are relative to its folder, and
+    /// errors name the file.
     pub fn read(path: &Path) -> Result<Rig> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e))?;
         let base = path.parent().unwrap_or(Path::new("."));
         Rig::from_json(&text, base).map_err(|e| Error::file(path, e))
     }
 
+    /// Validates a parsed document (its mesh, if any, already loaded); errors name the field
+    /// by JSON pointer.
     pub fn from_doc(doc: RigDoc) -> Result<Rig> {
         if doc.format != 1 {
             return Err(Error::invalid(
@@ -339,6 +381,7 @@ impl Rig {
         ))
     }
 
+    /// The channel with id `id`; an error listing the rig's ids if there is none.
     pub fn channel(&self, id: &str) -> Result<&Channel> {
         self.channels.iter().find(|c| c.id == id).ok_or_else(|| {
             let ids: Vec<_> = self.channels.iter().map(|c| c.id.as_str()).collect();

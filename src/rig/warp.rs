@@ -15,6 +15,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// A channel's warp: V per pixel (the warp map), and the wall point it lands on.
 #[derive(Debug, Clone)]
 pub struct ChannelWarp {
+    /// The warp map: the unit sampling vector V per projector pixel, invalid (A = 0) where the
+    /// pixel misses the wall or the content.
     pub map: NormalMap,
     /// The wall points in full precision, row by row (`None` off the wall); [`Self::wall`]
     /// makes them a raster.
@@ -135,6 +137,7 @@ impl Rig {
         NormalMap::from_pixels(pixels, attributes)
     }
 
+    /// Channel `ch`'s warp, every projector pixel q = (i, j) traced to the wall and the content.
     pub fn warp(&self, ch: &Channel) -> ChannelWarp {
         self.warp_unless(ch, &AtomicBool::new(false))
             .expect("never cancelled")

@@ -37,6 +37,8 @@ pub struct ViewAt<'a> {
 }
 
 impl<'a> ViewAt<'a> {
+    /// `view` at a `width` × `height` output; an error when the size is not one the renderer
+    /// takes ([`crate::raster::check_size`]).
     pub fn new(view: &'a View, width: u32, height: u32) -> Result<ViewAt<'a>> {
         crate::raster::check_size(width, height, 1)?;
         Ok(ViewAt::sized(view, width, height))
@@ -204,6 +206,7 @@ pub enum Scale {
     Cylinder(DVec3),
     /// Unit length along the view's axis.
     Plane(DVec3),
+    /// The unit directions unchanged (off-axis views, other projections, warp maps).
     Unit,
 }
 

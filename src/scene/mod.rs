@@ -29,15 +29,21 @@ pub fn sun() -> Vec3 {
 /// see [`crate::content::projective`]): both renderers show it, the GPU in its cube-map pass,
 /// the CPU in [`RayCaster::cube_projected`].
 pub struct Projected {
+    /// The 8-bit panorama, looked up at the direction (P − centre)/|P − centre| of each scene
+    /// point P a ray meets.
     pub content: crate::content::Content<[u8; 4]>,
+    /// The projection centre C in world coordinates, metres.
     pub centre: DVec3,
 }
 
 /// Indexed triangles with a colour per vertex.
 #[derive(Debug, Clone, Default)]
 pub struct Scene {
+    /// Vertex positions in world coordinates, metres, +y up.
     pub positions: Vec<[f32; 3]>,
+    /// One RGBA8 colour per vertex, in the order of `positions`.
     pub colors: Vec<[u8; 4]>,
+    /// A triangle list: three indices into `positions` per triangle (both sides are drawn).
     pub indices: Vec<u32>,
 }
 
@@ -70,6 +76,7 @@ pub fn terrain_height(x: f32, z: f32) -> f32 {
 }
 
 impl Scene {
+    /// Number of triangles (`indices.len() / 3`).
     pub fn triangles(&self) -> usize {
         self.indices.len() / 3
     }

@@ -67,6 +67,7 @@ impl Tolerance {
         }
     }
 
+    /// The tolerance for people: an angle in degrees (`0.05°`) or pixels (`0.5 px`).
     pub fn describe(self) -> String {
         match self {
             Tolerance::Angle(a) => format!("{}°", a.to_degrees()),
@@ -85,6 +86,7 @@ impl Tolerance {
 /// Which part of its cell a piece covers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Half {
+    /// The whole cell: its corners' directions form a parallelogram, so one linear map fits.
     Whole,
     /// Strictly above the diagonal from the cell's top-left to its bottom-right corner.
     Upper,
@@ -92,12 +94,15 @@ pub enum Half {
     Lower,
 }
 
+/// One perspective piece: a linear pixel → direction map (a pinhole camera at the eye)
+/// over its cell, or over the half of it on one side of the cell's diagonal.
 #[derive(Debug, Clone, Copy)]
 pub struct Piece {
     /// The scissor rectangle: pixels x0..x1, y0..y1.
     pub cell: [u32; 4],
     /// Pixel (x, y, 1) → direction from the eye (world, not unit).
     pub field: DMat3,
+    /// Which part of the cell the piece covers (the whole, or one side of `diagonal`).
     pub half: Half,
     /// The diagonal's end points, (x0, y0, x1, y1) doubled so that they are integers (border
     /// corners sit on pixel centres, half-way into a pixel).
@@ -127,13 +132,19 @@ impl Piece {
 /// A projection cut into pieces for one output size.
 #[derive(Debug, Clone)]
 pub struct Pieces {
+    /// Output width in pixels.
     pub width: u32,
+    /// Output height in pixels.
     pub height: u32,
+    /// Cells across.
     pub cols: u32,
+    /// Cells down.
     pub rows: u32,
     /// Cell edges in pixels: `xs[0] = 0`, `xs[cols] = width` (likewise `ys`).
     xs: Vec<u32>,
     ys: Vec<u32>,
+    /// The pieces, cell by cell in row-major order: none for a cell that shows nothing, one for
+    /// a whole cell, two (upper then lower) for a cell cut on its diagonal.
     pub pieces: Vec<Piece>,
     /// Per cell (row-major): its first piece and how many it has (0 where the projection shows
     /// nothing in the cell, 1 or 2).

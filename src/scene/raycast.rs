@@ -10,6 +10,8 @@ use crate::surface::Mesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// A scene's triangles in a BVH, each with one colour, ready to cast rays from an eye: the
+/// CPU's cube maps, pictures and exact references. Made by [`super::Scene::ray_caster`].
 pub struct RayCaster {
     pub(super) mesh: Mesh,
     /// Per triangle: its first vertex's colour.

@@ -6,20 +6,27 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::time::Duration;
 
+/// A connection to a daemon at one address, kept alive between requests, sending the bearer
+/// token when it has one.
 pub struct Client {
     addr: SocketAddr,
     token: Option<String>,
     conn: Option<BufReader<TcpStream>>,
 }
 
+/// A response, read whole.
 #[derive(Debug, Clone)]
 pub struct Reply {
+    /// The HTTP status code.
     pub status: u16,
+    /// Header names and values as received.
     pub headers: Vec<(String, String)>,
+    /// The body, `Content-Length` bytes.
     pub body: Vec<u8>,
 }
 
 impl Reply {
+    /// The value of header `name` (case-insensitive), if sent.
     pub fn header(&self, name: &str) -> Option<&str> {
         self.headers
             .iter()
@@ -27,6 +34,7 @@ impl Reply {
             .map(|(_, v)| v.as_str())
     }
 
+    /// The body as JSON; `Null` when it is not JSON.
     pub fn json(&self) -> serde_json::Value {
         serde_json::from_slice(&self.body).unwrap_or(serde_json::Value::Null)
     }
@@ -39,6 +47,8 @@ impl Reply {
 }
 
 impl Client {
+    /// A client of the daemon at `addr`; `token` is sent as `Authorization: Bearer …`. It
+    /// connects on the first request.
     pub fn new(addr: SocketAddr, token: Option<String>) -> Self {
         Client {
             addr,
@@ -144,6 +154,7 @@ impl Client {
         })
     }
 
+    /// `GET path`.
     pub fn get(&mut self, path: &str) -> std::io::Result<Reply> {
         self.send("GET", path, &[], b"")
     }

@@ -17,15 +17,12 @@ use routes::{
 
 pub use http::error::ApiError;
 pub use http::guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
-pub use http::state::{AppState, MAX_BODY, Options, STREAMS, WORKERS};
+pub use http::state::{AppState, FEEDS, MAX_BODY, Options, STREAMS, WORKERS};
 pub use storage::canvas::Canvas;
 pub use storage::store::{ChannelData, OpenOptions, Store};
 
 use axum::Router;
-use axum::extract::{Request, State};
-use axum::http::header::AUTHORIZATION;
-use axum::middleware::{self, Next};
-use axum::response::Response;
+use axum::middleware;
 use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
@@ -94,9 +91,11 @@ routes! {
     "/v1/events" => get(rig::events);
 }
 
+/// The daemon's HTTP service: every route of the table with the guard, token check and JSON
+/// errors around it.
 pub fn router(state: Arc<AppState>) -> Router {
-    // Layers run outside in: JSON errors, then the guard (Host, Origin, sizes, the body), then
-    // the token, then the route.
+    // Layers run outside in: JSON errors, then the guard (Host, Origin, the token, sizes, the
+    // body), then the route.
     table()
         .merge(console::routes())
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
@@ -110,57 +109,50 @@ pub fn router(state: Arc<AppState>) -> Router {
         .layer(axum::extract::DefaultBodyLimit::max(
             crate::limits::MESH_BYTES as usize,
         ))
-        .layer(middleware::from_fn_with_state(state.clone(), auth))
         .layer(middleware::from_fn_with_state(state.clone(), guard::guard))
         .layer(middleware::from_fn(guard::json_errors))
         .with_state(state)
-}
-
-/// With a token configured, every request must carry `Authorization: Bearer <token>`.
-async fn auth(
-    State(state): State<Arc<AppState>>,
-    req: Request,
-    next: Next,
-) -> Result<Response, ApiError> {
-    if let Some(token) = &state.options.token
-        && !console::is_asset(req.method(), req.uri().path())
-    {
-        let given = req
-            .headers()
-            .get(AUTHORIZATION)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "));
-        // Constant-time comparison: the token is a secret.
-        let ok = given.is_some_and(|g| {
-            g.len() == token.len()
-                && g.bytes()
-                    .zip(token.bytes())
-                    .fold(0u8, |a, (x, y)| a | (x ^ y))
-                    == 0
-        });
-        if !ok {
-            return Err(ApiError::Unauthorized);
-        }
-    }
-    Ok(next.run(req).await)
 }
 
 /// Time a client has to send a request's headers (on a new or a kept-alive connection).
 pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
 /// Time a response may wait on a client that does not read it.
 pub const WRITE_TIMEOUT: Duration = Duration::from_secs(60);
-/// Connections open at once; more are closed as they arrive. Lowered to fit the process's
-/// file limit, which is raised to its hard limit first.
+/// Connections open at once by default (`serve --max-connections`); more are closed as they
+/// arrive, beyond the [`RESERVE`]. Lowered to fit the process's file limit, which is raised to
+/// its hard limit first.
 pub const CONNECTIONS: usize = 4096;
+/// Connections beyond the cap that are still answered, one request each: health, so a
+/// monitor sees a daemon that is full rather than a dead one, and 503 for anything else.
+pub const RESERVE: usize = 16;
+/// Time a connection in the [`RESERVE`] has to send its request's headers.
+const RESERVE_HEADER_TIMEOUT: Duration = Duration::from_secs(2);
 /// How long shutting down waits for requests in flight before it gives up on them.
 pub const DRAIN: Duration = Duration::from_secs(5);
 
-/// The connection cap this process can keep: [`CONNECTIONS`], or fewer where the file limit
-/// (raised to its hard limit) leaves less room beside the files the daemon itself opens.
-fn connection_cap() -> usize {
+/// The connection cap this process can keep: `wanted`, or fewer where the file limit (raised
+/// to its hard limit) leaves less room beside the reserve and the files the daemon itself
+/// opens.
+fn connection_cap(wanted: usize) -> usize {
     let files = rlimit::increase_nofile_limit(u64::MAX).unwrap_or(1024);
-    let room = usize::try_from(files.saturating_sub(256)).unwrap_or(usize::MAX);
-    CONNECTIONS.min(room.max(16))
+    let room = usize::try_from(files.saturating_sub(256 + RESERVE as u64)).unwrap_or(usize::MAX);
+    wanted.min(room.max(16))
+}
+
+/// What a connection in the reserve is served: health, and 503 for every other route.
+fn reserve_router(state: Arc<AppState>) -> Router {
+    Router::new()
+        .route("/v1/health", axum::routing::get(routes::rig::health))
+        .fallback(|| async {
+            ApiError::refused(
+                axum::http::StatusCode::SERVICE_UNAVAILABLE,
+                None,
+                "the daemon is at its connection cap; retry shortly",
+            )
+        })
+        .layer(middleware::from_fn_with_state(state.clone(), guard::guard))
+        .layer(middleware::from_fn(guard::json_errors))
+        .with_state(state)
 }
 
 /// Serves until `shutdown` completes, then stops accepting, ends the change feeds and lets
@@ -177,13 +169,19 @@ pub async fn launch(
     use hyper_util::rt::{TokioIo, TokioTimer};
     let _ = state.bound.set(listener.local_addr()?);
     let app = router(state.clone());
-    let cap = connection_cap();
+    let reserve_app = reserve_router(state.clone());
+    let cap = connection_cap(state.options.connections);
     let open = Arc::new(Semaphore::new(cap));
+    let reserve = Arc::new(Semaphore::new(RESERVE));
     let graceful = hyper_util::server::graceful::GracefulShutdown::new();
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(TokioTimer::new())
         .header_read_timeout(HEADER_TIMEOUT)
         .max_buf_size(MAX_HEADERS * 4);
+    let mut reserve_http = http.clone();
+    reserve_http
+        .header_read_timeout(RESERVE_HEADER_TIMEOUT)
+        .keep_alive(false);
     tokio::pin!(shutdown);
     loop {
         let stream = tokio::select! {
@@ -198,9 +196,15 @@ pub async fn launch(
             },
             () = &mut shutdown => break,
         };
-        let Ok(permit) = open.clone().try_acquire_owned() else {
-            tracing::warn!(cap, "connection refused: at the connection cap");
-            continue;
+        let (permit, app, http) = match open.clone().try_acquire_owned() {
+            Ok(p) => (p, &app, &http),
+            Err(_) => match reserve.clone().try_acquire_owned() {
+                Ok(p) => (p, &reserve_app, &reserve_http),
+                Err(_) => {
+                    tracing::warn!(cap, "connection refused: at the connection cap");
+                    continue;
+                }
+            },
         };
         let _ = stream.set_nodelay(true);
         let mut io = tokio_io_timeout::TimeoutStream::new(stream);

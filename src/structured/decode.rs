@@ -66,17 +66,25 @@ pub struct Rejected {
 /// The decoded map, one entry per camera pixel.
 #[derive(Debug, Clone)]
 pub struct Decoded {
+    /// The capture's width in camera pixels.
     pub width: u32,
+    /// The capture's height in camera pixels.
     pub height: u32,
+    /// Per camera pixel, row by row from the top: the decoded sample, or `None` where it was
+    /// rejected (counted in `rejected`).
     pub samples: Vec<Option<Sample>>,
+    /// Why the undecoded pixels were not decoded, counted.
     pub rejected: Rejected,
 }
 
 impl Decoded {
+    /// The sample of camera pixel (x, y), x < `width` and y < `height`; `None` where it was not
+    /// decoded.
     pub fn get(&self, x: u32, y: u32) -> Option<Sample> {
         self.samples[(y * self.width + x) as usize]
     }
 
+    /// How many camera pixels were decoded.
     pub fn valid(&self) -> usize {
         self.samples.iter().flatten().count()
     }
@@ -132,7 +140,7 @@ pub fn decode<F: Borrow<Grey> + Sync>(
         .into_par_iter()
         .with_min_len(4096)
         .map(|i| {
-            let v = |k: usize| f64::from(frames[k].data[i]);
+            let v = |k: usize| frames[k].level(i);
             let contrast = v(0) - v(1);
             if contrast < opts.min_contrast {
                 return (None, Some(Fail::Dark), [false; 2]);

@@ -139,8 +139,11 @@ pub fn camera_pose(
 /// What a capture set made of a projector: the decoded map, the correspondences taken from
 /// it, and the calibration.
 pub struct FromCaptures {
+    /// The decoded captures: per camera pixel, the projector pixel that lights it.
     pub decoded: decode::Decoded,
+    /// The correspondences taken from them (decoded pixels' wall points), with free intrinsics.
     pub problem: crate::calibration::Problem,
+    /// The projector's calibration from those correspondences.
     pub calibration: crate::calibration::Calibration,
 }
 
@@ -213,14 +216,19 @@ pub fn calibrate_decoded(
 /// A fresh capture compared with what the current calibration predicts.
 #[derive(Debug, Clone)]
 pub struct Check {
+    /// The camera's width in pixels (the row length of `residuals`).
     pub width: u32,
+    /// The camera's height in pixels.
     pub height: u32,
     /// Per camera pixel: decoded − predicted projector coordinate, pixels.
     pub residuals: Vec<Option<[f64; 2]>>,
     /// Pixels compared.
     pub count: usize,
+    /// Median residual length, projector pixels; NaN when no pixel was compared.
     pub p50: f64,
+    /// 95th-percentile residual length, projector pixels; NaN when no pixel was compared.
     pub p95: f64,
+    /// Largest residual length, projector pixels; NaN when no pixel was compared.
     pub max: f64,
     /// The median residual above which the projector is said to have moved: 0.15 px, or 4×
     /// the capture's own median predicted deviation where the capture is noisier.

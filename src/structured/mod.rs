@@ -52,25 +52,66 @@ pub const PERIOD: u32 = 16;
 /// Phase steps per axis.
 pub const STEPS: u32 = 12;
 
-/// An 8-bit single-channel image, row-major, top row first: a pattern or a camera capture.
+/// A single-channel image, row-major, top row first: a pattern or a camera capture. Patterns
+/// are 8-bit; a capture from a 16-bit PNG keeps its 16 bits, which the decoder reads, so a
+/// camera's finer levels are not cut away.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grey {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// The `width × height` grey levels (0 black, 255 white), row by row from the top; for a
+    /// 16-bit capture, its levels rounded to 8 bits.
     pub data: Vec<u8>,
+    /// A 16-bit capture's own levels (0 black, 65535 white), when it had more than 8 bits.
+    pub deep: Option<Vec<u16>>,
 }
 
 impl Grey {
+    /// An 8-bit image.
+    pub fn new(width: u32, height: u32, data: Vec<u8>) -> Grey {
+        Grey {
+            width,
+            height,
+            data,
+            deep: None,
+        }
+    }
+
+    /// Pixel `i`'s level on the 8-bit scale (0–255), with a 16-bit capture's fraction.
+    pub fn level(&self, i: usize) -> f64 {
+        match &self.deep {
+            Some(d) => f64::from(d[i]) / 257.0,
+            None => f64::from(self.data[i]),
+        }
+    }
+
+    /// The bytes the image holds in memory.
+    pub fn bytes(&self) -> usize {
+        self.data.len() + self.deep.as_ref().map_or(0, |d| 2 * d.len())
+    }
+
+    /// The image as a greyscale PNG file: 16-bit for a 16-bit capture, else 8-bit.
     pub fn png(&self) -> Result<Vec<u8>> {
         let mut out = Vec::new();
         let mut enc = png::Encoder::new(&mut out, self.width, self.height);
         enc.set_color(png::ColorType::Grayscale);
-        enc.set_depth(png::BitDepth::Eight);
+        let bytes = match &self.deep {
+            Some(d) => {
+                enc.set_depth(png::BitDepth::Sixteen);
+                d.iter().flat_map(|v| v.to_be_bytes()).collect()
+            }
+            None => {
+                enc.set_depth(png::BitDepth::Eight);
+                self.data.clone()
+            }
+        };
         enc.set_compression(png::Compression::Fast);
         let mut w = enc
             .write_header()
             .map_err(|e| Error::invalid("png", e.to_string()))?;
-        w.write_image_data(&self.data)
+        w.write_image_data(&bytes)
             .map_err(|e| Error::invalid("png", e.to_string()))?;
         w.finish()
             .map_err(|e| Error::invalid("png", e.to_string()))?;
@@ -78,7 +119,8 @@ impl Grey {
     }
 
     /// Reads a PNG or JPEG of any colour type as luma (Rec. 709 weights, as the `image`
-    /// crate converts). `field` names the input in errors.
+    /// crate converts), keeping 16 bits where the file has more than 8. `field` names the
+    /// input in errors.
     pub fn decode(bytes: &[u8], field: &str) -> Result<Grey> {
         let bad = |e: image::ImageError| {
             Error::invalid(field, format!("is not a PNG or JPEG image: {e}"))
@@ -97,10 +139,20 @@ impl Grey {
         limits.max_alloc = Some(u64::from(w) * u64::from(h) * 8 + (1 << 20));
         r.limits(limits);
         let img = r.decode().map_err(bad)?;
+        let channel_bytes = img.color().bytes_per_pixel() / img.color().channel_count();
+        if channel_bytes == 1 {
+            return Ok(Grey::new(w, h, img.into_luma8().into_raw()));
+        }
+        let deep = img.into_luma16().into_raw();
+        let data = deep
+            .iter()
+            .map(|&v| ((u32::from(v) + 128) / 257) as u8)
+            .collect();
         Ok(Grey {
             width: w,
             height: h,
-            data: img.into_luma8().into_raw(),
+            data,
+            deep: Some(deep),
         })
     }
 }
@@ -111,24 +163,35 @@ pub const CAPTURE_PIXELS: usize = 24 << 20;
 /// Which axis a frame codes: projector columns (x) or rows (y).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Axis {
+    /// Projector columns: the frame varies across the image, in vertical stripes.
     X,
+    /// Projector rows: the frame varies down the image, in horizontal stripes.
     Y,
 }
 
 /// One frame of the sequence.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Frame {
+    /// Full white (255) everywhere; with `Black`, it tells which camera pixels the projector
+    /// lights.
     White,
+    /// Black (0) everywhere: the ambient light and the projector's black level.
     Black,
     /// Gray code bit `bit` (0 = most significant) of half-period stripes.
     Gray {
+        /// The axis the bit codes.
         axis: Axis,
+        /// Which bit, 0 the most significant.
         bit: u32,
+        /// Whether this is the bit's inverse, shown right after it; a bit reads 1 where it is
+        /// brighter than its inverse.
         inverse: bool,
     },
     /// Phase step `step` of [`STEPS`].
     Phase {
+        /// The axis the sinusoid varies along.
         axis: Axis,
+        /// The step, 0 to [`STEPS`] − 1: the sinusoid shifted by 2π·step/[`STEPS`].
         step: u32,
     },
 }
@@ -154,6 +217,7 @@ pub enum Code {
 }
 
 impl Code {
+    /// The code's name, as it parses: `gray` or `xor`.
     pub fn name(self) -> &'static str {
         match self {
             Code::Gray => "gray",
@@ -179,14 +243,19 @@ impl std::str::FromStr for Code {
 /// The pattern sequence for one projector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PatternSet {
+    /// The projector's width in pixels, 1 to `limits::CHANNEL_SIDE` (16384).
     pub width: u32,
+    /// The projector's height in pixels, 1 to `limits::CHANNEL_SIDE` (16384).
     pub height: u32,
     /// The phase-shift period, projector pixels; the finest Gray stripe is half of it.
     pub period: u32,
+    /// How the Gray bits are shown; [`Code::Gray`] unless [`PatternSet::with_code`] chose another.
     pub code: Code,
 }
 
 impl PatternSet {
+    /// The sequence for a `width` × `height` projector with the default [`PERIOD`] and Gray code;
+    /// an error naming `resolution` for a side of 0 or above `limits::CHANNEL_SIDE`.
     pub fn new(width: u32, height: u32) -> Result<PatternSet> {
         let side = crate::limits::CHANNEL_SIDE;
         if !(1..=side).contains(&width) || !(1..=side).contains(&height) {
@@ -252,10 +321,13 @@ impl PatternSet {
         out
     }
 
+    /// The number of frames: white, black, then per axis two per Gray bit and [`STEPS`] phase
+    /// steps.
     pub fn len(&self) -> usize {
         2 + 2 * STEPS as usize + 2 * (self.bits(Axis::X) + self.bits(Axis::Y)) as usize
     }
 
+    /// Always false: every sequence has its white and black frames.
     pub fn is_empty(&self) -> bool {
         false
     }
@@ -318,11 +390,7 @@ impl PatternSet {
                 row.fill(profile[y]);
             }
         }
-        Grey {
-            width: self.width,
-            height: self.height,
-            data,
-        }
+        Grey::new(self.width, self.height, data)
     }
 }
 

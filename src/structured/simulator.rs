@@ -48,7 +48,9 @@ pub struct SimulatorOptions {
     pub supersample: u32,
     /// Point spread σ, camera pixels (0: none).
     pub blur: f64,
+    /// Projector gamma γp: a pattern value v lights the wall with (v / 255)^γp; 0.5–4.
     pub projector_gamma: f64,
+    /// Camera gamma γc: a signal s is recorded as 255 · s^(1/γc); 0.5–4.
     pub camera_gamma: f64,
     /// Ambient light as a fraction of the projector's full white.
     pub ambient: f64,
@@ -60,6 +62,8 @@ pub struct SimulatorOptions {
     pub noise: f64,
     /// The fraction of full scale that full white plus ambient reaches at the image centre.
     pub exposure: f64,
+    /// Seed of the sensor noise, drawn per frame and row (the same capture on any number of
+    /// threads).
     pub seed: u64,
     /// The sequence's phase period, projector pixels ([`PatternSet::with_period`]).
     pub period: u32,
@@ -245,10 +249,12 @@ impl Simulator {
         self.opts.seed = seed;
     }
 
+    /// The pattern sequence the projector shows.
     pub fn patterns(&self) -> &PatternSet {
         &self.set
     }
 
+    /// The camera: its lens, pose and resolution.
     pub fn camera(&self) -> &Channel {
         &self.camera
     }
@@ -349,9 +355,9 @@ impl Simulator {
     /// What the camera captures while the projector shows frame `n` of its sequence.
     pub fn capture(&self, n: usize) -> Result<Grey> {
         let frame = self.set.frame(n, "frame")?;
-        let linear = |v: &u8| self.linear(*v);
+        let linear = |v: &u8| self.linear(f64::from(*v));
         let light = match frame.axis() {
-            None => Light::Uniform(self.linear(self.set.value(frame, 0))),
+            None => Light::Uniform(self.linear(f64::from(self.set.value(frame, 0)))),
             Some(axis) => Light::Stripes {
                 rows: axis == Axis::Y,
                 values: self.set.profile(frame).iter().map(linear).collect(),
@@ -373,13 +379,15 @@ impl Simulator {
                 ),
             ));
         }
-        let values = image.data.iter().map(|v| self.linear(*v)).collect();
+        let values = (0..image.data.len())
+            .map(|i| self.linear(image.level(i)))
+            .collect();
         let width = image.width as usize;
         Ok(self.film(&Light::Image { width, values }, n))
     }
 
-    fn linear(&self, v: u8) -> f32 {
-        (f64::from(v) / 255.0).powf(self.opts.projector_gamma) as f32
+    fn linear(&self, v: f64) -> f32 {
+        (v / 255.0).powf(self.opts.projector_gamma) as f32
     }
 
     /// Steps 3–7 of the module's list for the projector's light, noise seeded by `n`.
@@ -426,11 +434,7 @@ impl Simulator {
                     *out = v.round().clamp(0.0, 255.0) as u8;
                 }
             });
-        Grey {
-            width: self.camera.width,
-            height: self.camera.height,
-            data,
-        }
+        Grey::new(self.camera.width, self.camera.height, data)
     }
 
     /// Adds the one-bounce light of the projector's `light`.

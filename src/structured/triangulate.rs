@@ -236,9 +236,11 @@ pub struct WallFit {
     pub screen: Screen,
     /// Points fitted, and points left out as outliers (more than 5 robust deviations off).
     pub count: usize,
+    /// Points left out of the second fit (more than 5 robust deviations off the first).
     pub outliers: usize,
     /// RMS and largest distance of the fitted points to the fitted surface, metres.
     pub rms: f64,
+    /// Largest distance of a fitted point to the fitted surface, metres.
     pub max: f64,
 }
 

@@ -6,6 +6,7 @@ use crate::error::{Error, Result};
 use glam::DVec3;
 use std::path::Path;
 
+/// A triangle mesh screen in world coordinates (metres), with its bounding-volume hierarchy.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mesh {
     tris: Vec<[DVec3; 3]>,
@@ -28,6 +29,8 @@ struct Node {
 const LEAF: usize = 4;
 
 impl Mesh {
+    /// A mesh of the given triangles (vertices in metres), its tree built; refused when empty or
+    /// when a vertex is not finite.
     pub fn new(tris: Vec<[DVec3; 3]>) -> Result<Self> {
         if tris.is_empty() {
             return Err(Error::invalid("mesh", "has no triangles"));
@@ -103,6 +106,8 @@ impl Mesh {
         (far >= near.max(EPS) && near <= limit).then_some(near)
     }
 
+    /// What the unit ray from `origin` in direction `dir` meets at the nearest triangle: a lit
+    /// point, a grazing one, or a miss.
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         match self.first_hit(origin, dir) {
             Some((t, _, n)) => classify(origin, dir, t, n),

@@ -36,18 +36,24 @@ pub enum Hit {
     /// The first lit point: distance along the unit ray, the point, the unit normal facing the
     /// ray's origin.
     Lit {
+        /// Distance from the ray's origin to the point, metres (the ray is unit length).
         t: f64,
+        /// The point hit, world coordinates in metres.
         point: DVec3,
+        /// The surface's unit normal at the point, turned towards the ray's origin.
         normal: DVec3,
     },
     /// The ray meets the surface only at a grazing angle (the point is given for diagnostics).
     Grazing {
+        /// Where the ray grazes the surface, world coordinates in metres.
         point: DVec3,
     },
+    /// The ray meets no lit part of the surface.
     Miss,
 }
 
 impl Hit {
+    /// The lit point, if the ray lights one (`None` for a grazing hit or a miss).
     pub fn point(&self) -> Option<DVec3> {
         match self {
             Hit::Lit { point, .. } => Some(*point),
@@ -75,15 +81,21 @@ fn classify(origin: DVec3, dir: DVec3, t: f64, n: DVec3) -> Hit {
 
 /// A [`Screen`] ready to hit many rays: see [`Screen::prepare`].
 pub enum PreparedScreen<'a> {
+    /// A prepared [`Cylinder`].
     Cylinder(PreparedCylinder<'a>),
+    /// A prepared [`Dome`].
     Dome(PreparedDome),
+    /// A prepared [`Plane`].
     Plane(PreparedPlane),
+    /// A mesh screen's loaded mesh; `None` (not loaded) misses every ray.
     Mesh(Option<&'a Mesh>),
 }
 
 impl PreparedScreen<'_> {
     // Always inlined, with the shapes' tests: a hit returned through memory costs a
     // store-forwarding stall per pixel.
+    /// The first lit point along the unit ray from `origin` in direction `dir`, as
+    /// [`Screen::intersect`].
     #[inline(always)]
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         match self {
@@ -99,12 +111,17 @@ impl PreparedScreen<'_> {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Screen {
+    /// `"kind": "cylinder"`: part of a cylinder, lit from inside.
     Cylinder(Cylinder),
+    /// `"kind": "dome"`: part of a sphere, tilted and truncated, lit from inside.
     Dome(Dome),
+    /// `"kind": "plane"`: a flat rectangle.
     Plane(Plane),
     /// A triangle mesh from an OBJ file (path relative to the rig file).
     Mesh {
+        /// The OBJ file's path as the rig writes it, relative to the rig file.
         obj: String,
+        /// The mesh read from `obj` (not part of the JSON); `None` until [`Screen::load`].
         #[serde(skip)]
         loaded: Option<std::sync::Arc<Mesh>>,
     },
@@ -188,6 +205,23 @@ impl Screen {
             Screen::Cylinder(c) => {
                 let a = DVec3::from_array(c.axis).normalize();
                 let o = point - DVec3::from_array(c.centre);
+                // Along the axis, the room is the wall's height, and the eye's where it stands
+                // above or below it: a centre far up the axis would see the whole wall in one
+                // direction (every pixel the nadir at 1e6 m, nothing lit at 1e300 m).
+                let (h, eye_h) = (o.dot(a), (eye - DVec3::from_array(c.centre)).dot(a));
+                let (lo, hi) = (c.height[0].min(eye_h), c.height[1].max(eye_h));
+                if !(lo..=hi).contains(&h) {
+                    return Err(Error::invalid(
+                        field,
+                        format!(
+                            "lies {} along the axis, outside the cylinder's height from {} to {} \
+                             (the wall's, extended to the eye)",
+                            m(h),
+                            m(lo),
+                            m(hi)
+                        ),
+                    ));
+                }
                 let rho = (o - a * o.dot(a)).length();
                 (
                     c.radius - rho,
@@ -271,6 +305,7 @@ impl Screen {
     }
 }
 
+/// `v` if all its components are finite, else an error naming `field`.
 pub fn finite3(field: &str, v: DVec3) -> Result<DVec3> {
     if v.is_finite() {
         Ok(v)
@@ -279,6 +314,7 @@ pub fn finite3(field: &str, v: DVec3) -> Result<DVec3> {
     }
 }
 
+/// `v` if it is finite and above zero, else an error naming `field`.
 pub fn positive(field: &str, v: f64) -> Result<f64> {
     if v.is_finite() && v > 0.0 {
         Ok(v)

@@ -35,6 +35,7 @@ pub struct Cylinder {
     /// A point on the axis; heights are measured from it.
     #[serde(default)]
     pub centre: [f64; 3],
+    /// The axis direction (any non-zero length); heights run along it. +y by default.
     #[serde(default = "up")]
     pub axis: [f64; 3],
     /// Bottom and top along the axis from `centre`, metres.
@@ -56,6 +57,8 @@ impl Cylinder {
         (a, front, front.cross(a))
     }
 
+    /// Checks the fields (radius positive, axis non-zero, bottom below top, arc within ±180°);
+    /// `field` is the cylinder's JSON pointer for error messages.
     pub fn validate(&self, field: &str) -> Result<()> {
         positive(&format!("{field}/radius"), self.radius)?;
         finite3(&format!("{field}/centre"), DVec3::from_array(self.centre))?;
@@ -83,6 +86,7 @@ impl Cylinder {
         Ok(())
     }
 
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         self.prepare().intersect(origin, dir)
     }
@@ -114,6 +118,7 @@ pub struct PreparedCylinder<'a> {
 }
 
 impl PreparedCylinder<'_> {
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
     #[inline(always)]
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         let (c, a) = (self.c, self.axis);
@@ -154,7 +159,9 @@ impl PreparedCylinder<'_> {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Dome {
+    /// The sphere's radius, metres.
     pub radius: f64,
+    /// The sphere's centre, metres; the origin by default.
     #[serde(default)]
     pub centre: [f64; 3],
     /// Degrees the zenith leans forward (towards −z).
@@ -167,11 +174,14 @@ pub struct Dome {
 }
 
 impl Dome {
+    /// The unit zenith direction: +y leaned `tilt` degrees towards −z.
     pub fn zenith(&self) -> DVec3 {
         let t = self.tilt.to_radians();
         DVec3::new(0.0, t.cos(), -t.sin())
     }
 
+    /// Checks the fields (radius positive, tilt within ±90°, min_elevation strictly within
+    /// ±90°); `field` is the dome's JSON pointer for error messages.
     pub fn validate(&self, field: &str) -> Result<()> {
         positive(&format!("{field}/radius"), self.radius)?;
         finite3(&format!("{field}/centre"), DVec3::from_array(self.centre))?;
@@ -193,6 +203,7 @@ impl Dome {
         Ok(())
     }
 
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         self.prepare().intersect(origin, dir)
     }
@@ -218,6 +229,7 @@ pub struct PreparedDome {
 }
 
 impl PreparedDome {
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
     #[inline(always)]
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         let o = origin - self.centre;
@@ -245,13 +257,16 @@ impl PreparedDome {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plane {
+    /// The rectangle's centre, metres.
     pub centre: [f64; 3],
     /// Towards the viewer.
     pub normal: [f64; 3],
     /// The rectangle's up direction (made perpendicular to the normal).
     #[serde(default = "up")]
     pub up: [f64; 3],
+    /// The rectangle's extent across `up`, metres.
     pub width: f64,
+    /// The rectangle's extent along `up`, metres.
     pub height: f64,
 }
 
@@ -263,6 +278,8 @@ impl Plane {
         (n, up, up.cross(n))
     }
 
+    /// Checks the fields (normal and up non-zero and not parallel, width and height
+    /// positive); `field` is the plane's JSON pointer for error messages.
     pub fn validate(&self, field: &str) -> Result<()> {
         finite3(&format!("{field}/centre"), DVec3::from_array(self.centre))?;
         let n = unit(&format!("{field}/normal"), DVec3::from_array(self.normal))?;
@@ -278,6 +295,7 @@ impl Plane {
         Ok(())
     }
 
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         self.prepare().intersect(origin, dir)
     }
@@ -306,6 +324,7 @@ pub struct PreparedPlane {
 }
 
 impl PreparedPlane {
+    /// The first lit point along the unit ray from `origin` in direction `dir`.
     #[inline(always)]
     pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Hit {
         let (c, n) = (self.centre, self.n);

@@ -17,18 +17,27 @@ use rayon::prelude::*;
 /// A tolerance for the reconstruction error.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Tolerance {
+    /// At most this angle between the screen's sampling vectors and the exact ones, degrees.
     Degrees(f64),
+    /// At most this error in output pixels (the angle over a pixel's local angular size).
     Pixels(f64),
 }
 
 /// How well a tile screen reproduces its source.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Report {
+    /// Grid columns (a triangle soup's triangle count).
     pub columns: usize,
+    /// Grid rows (1 for a triangle soup).
     pub rows: usize,
+    /// Features in all.
     pub features: usize,
+    /// Largest angle between the screen's sampling vector and the exact one at a pixel centre,
+    /// degrees.
     pub max_deg: f64,
+    /// RMS of that angle over the covered pixels, degrees.
     pub rms_deg: f64,
+    /// Largest error in output pixels: the angle over the local angular size of a pixel.
     pub max_px: f64,
     /// Pixels the source shows but no tile covers (tiles with a corner outside the source's
     /// formula, e.g. at an orthographic fisheye's rim).

@@ -21,6 +21,7 @@ impl Source {
         Source::from_doc(projection::ViewDoc::new(projection, params), aspect)
     }
 
+    /// The view this source describes, for an output of its `aspect`.
     pub fn view(&self) -> Result<View> {
         self.doc().view(self.aspect)
     }

@@ -16,38 +16,56 @@ use glam::DVec3;
 pub enum Edit {
     /// Sets any of a grid feature's angles, scale and f (column k, row l).
     SetFeature {
+        /// The feature's column k, from 0 at the left.
         column: usize,
+        /// The feature's row l, from 0 at the top.
         row: usize,
+        /// New longitude φ, degrees (0 ahead, positive to the right; within ±360); kept when
+        /// absent.
         phi: Option<f64>,
+        /// New latitude θ, degrees (positive up; within ±360); kept when absent.
         theta: Option<f64>,
+        /// New angular zoom, positive; kept when absent.
         scale: Option<f64>,
+        /// New custom value f (the renderer's saturation); kept when absent.
         f: Option<f64>,
     },
     /// Resamples the features of columns k0..=k1, rows l0..=l1 from another projection and view,
     /// which then spans that region of the screen (s, t = ±1 at its edges).
     SetRegion {
+        /// `[first, last]` feature columns the region spans, first < last.
         columns: (usize, usize),
+        /// `[first, last]` feature rows the region spans, first < last.
         rows: (usize, usize),
+        /// The projection and view the region shows, written as a tile screen's `source` (with its
+        /// `aspect`).
         source: Source,
     },
     /// Inserts a row of features halfway between rows `at − 1` and `at`.
     InsertRow {
+        /// The row the new one goes before, 1 to rows − 1.
         at: usize,
     },
     /// Inserts a column of features halfway between columns `at − 1` and `at`.
     InsertColumn {
+        /// The column the new one goes before, 1 to columns − 1.
         at: usize,
     },
+    /// Removes row `at` of features; a grid keeps at least 2 rows.
     RemoveRow {
+        /// The row to remove, from 0 at the top.
         at: usize,
     },
+    /// Removes column `at` of features; a grid keeps at least 2 columns.
     RemoveColumn {
+        /// The column to remove, from 0 at the left.
         at: usize,
     },
     /// Replaces every inner feature's angles, scale and f by the mean of its four neighbours,
     /// `iterations` times; the border stays, so the screen keeps its extent, and so do invalid
     /// features and the valid ones beside them (the edge of what the screen shows).
     Smooth {
+        /// How many passes, at most `limits::SMOOTH_ITERATIONS` (1000).
         iterations: usize,
     },
     /// Back to the projection the screen was sampled from, at the current grid size.
@@ -56,14 +74,17 @@ pub enum Edit {
     /// each way; the new features are the warp as it is shown there, so nothing moves (within
     /// 0.01°, see [`super::refine`]).
     Subdivide {
+        /// `[first, last]` feature columns (first < last) whose tiles are split; all when absent.
         #[serde(default)]
         columns: Option<(usize, usize)>,
+        /// `[first, last]` feature rows (first < last) whose tiles are split; all when absent.
         #[serde(default)]
         rows: Option<(usize, usize)>,
     },
     /// Removes the inner rows and columns whose removal moves no pixel by more than `tolerance`
     /// degrees (default 0.01).
     Coarsen {
+        /// Largest move a removal may cause, degrees; [`REFINE_TOLERANCE`] (0.01) when absent.
         #[serde(default)]
         tolerance: Option<f64>,
     },
@@ -72,8 +93,11 @@ pub enum Edit {
     /// (default 0.01) or has `max_features` (default four times as many as now); new features
     /// carry the edits around them along.
     Refine {
+        /// Departure from the source to get within, degrees; [`REFINE_TOLERANCE`] (0.01) when
+        /// absent.
         #[serde(default)]
         tolerance: Option<f64>,
+        /// Most features the screen may grow to; four times as many as now when absent.
         #[serde(default)]
         max_features: Option<usize>,
     },

@@ -81,18 +81,26 @@ pub enum Layout {
     /// `columns` × `rows` features, row-major from the top row; quad (k, l) has corners
     /// (k, l), (k+1, l), (k+1, l+1), (k, l+1) and is split along its (k, l)–(k+1, l+1) diagonal.
     Grid {
+        /// Features per row, 2 to `limits::TILE_SIDE` (1025).
         columns: usize,
+        /// Rows of features, 2 to `limits::TILE_SIDE` (1025).
         rows: usize,
+        /// The `columns × rows` features, row by row from the top.
         features: Vec<Feature>,
     },
     /// Independent triangles.
-    Soup { triangles: Vec<[Feature; 3]> },
+    Soup {
+        /// The triangles, each its three corner features; 1 to `limits::TILE_TRIANGLES`
+        /// (32 768).
+        triangles: Vec<[Feature; 3]>,
+    },
 }
 
 /// A tile screen as stored (JSON, `"format": 1`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TileScreen {
+    /// File format version: 1, the only one known.
     pub format: u32,
     /// Increases with every edit.
     #[serde(default)]
@@ -103,6 +111,7 @@ pub struct TileScreen {
     /// How features are interpolated across a tile (see [`raster`]).
     #[serde(default)]
     pub interpolation: Interpolation,
+    /// The features and how they are connected.
     pub layout: Layout,
 }
 
@@ -147,6 +156,8 @@ pub fn min_angle(t: &[Feature; 3]) -> f64 {
 }
 
 impl TileScreen {
+    /// A `columns` × `rows` grid of `features` (row by row from the top), validated: revision 0,
+    /// no source, [`Interpolation::Angles`].
     pub fn grid(columns: usize, rows: usize, features: Vec<Feature>) -> Result<Self> {
         let t = TileScreen {
             format: 1,
@@ -163,6 +174,7 @@ impl TileScreen {
         Ok(t)
     }
 
+    /// A triangle soup, validated: revision 0, no source, [`Interpolation::Angles`].
     pub fn soup(triangles: Vec<[Feature; 3]>) -> Result<Self> {
         let t = TileScreen {
             format: 1,
@@ -219,6 +231,7 @@ impl TileScreen {
         }
     }
 
+    /// How many features the screen holds: a grid's, or three per triangle of a soup.
     pub fn feature_count(&self) -> usize {
         match &self.layout {
             Layout::Grid { features, .. } => features.len(),
@@ -327,10 +340,13 @@ impl TileScreen {
             .collect()
     }
 
+    /// The screen as stored: pretty-printed JSON.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("tile screens always serialise")
     }
 
+    /// A stored screen read from JSON and validated; an error naming `tiles` when the text is not
+    /// a tile screen.
     pub fn from_json(text: &str) -> Result<Self> {
         let t: TileScreen = serde_json::from_str(text)
             .map_err(|e| Error::invalid("tiles", format!("not a tile screen: {e}")))?;

@@ -41,10 +41,14 @@ use std::ops::Range;
 /// whole screen, or rows `top..top + height` of it.
 #[derive(Debug, Clone)]
 pub struct FeatureMap {
+    /// Width in pixels.
     pub width: usize,
+    /// Rows held, in pixels (the screen's height for a whole map).
     pub height: usize,
     /// The screen row the first row of `data` is (0 for a whole map).
     pub top: usize,
+    /// Per pixel, row by row from `top`: the unit view direction N and the interpolated f, or
+    /// `None` where no tile covers it.
     pub data: Vec<Option<(DVec3, f64)>>,
 }
 

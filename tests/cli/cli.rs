@@ -202,7 +202,12 @@ fn bad_input_names_the_flag_and_leaves_no_file() {
         let (args, said) = line
             .split_once(" | ")
             .expect("`arguments | words` on every line");
-        let args: Vec<&str> = args.split_whitespace().collect();
+        let root = env!("CARGO_MANIFEST_DIR");
+        let args: Vec<String> = args
+            .split_whitespace()
+            .map(|a| a.replace("$ROOT", root))
+            .collect();
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let (ok, err) = s.run(&args);
         assert!(!ok, "{line}: succeeded");
         for word in said.split_whitespace() {

@@ -276,3 +276,62 @@ fn the_parser_joins_continuations_and_drops_comments() {
         ]
     );
 }
+
+/// The `--help` of every command, by command name.
+fn helps() -> Vec<(String, String)> {
+    let help = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+            .args(args)
+            .arg("--help")
+            .output()
+            .unwrap();
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let top = help(&[]);
+    let names: Vec<String> = top
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .filter(|n| n != "help")
+        .collect();
+    assert!(names.len() > 10, "{top}");
+    names
+        .into_iter()
+        .map(|n| {
+            let text = help(&[n.as_str()]);
+            (n, text)
+        })
+        .collect()
+}
+
+/// Help that sends a user to `omniwarp X --flag` names a command and flag that exist (it once
+/// sent them to `bench camera --out`, which does not).
+#[test]
+fn every_command_a_help_text_names_exists() {
+    let helps = helps();
+    let mut wrong = Vec::new();
+    for (name, text) in &helps {
+        // A help text wraps its lines: join them before looking for the quoted commands.
+        let joined = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        for quoted in joined.split('`').skip(1).step_by(2) {
+            let Some(rest) = quoted.strip_prefix("omniwarp ") else {
+                continue;
+            };
+            let mut words = rest.split_whitespace();
+            let command = words.next().unwrap_or_default();
+            let Some((_, target)) = helps.iter().find(|(n, _)| n == command) else {
+                wrong.push(format!("{name}: `{quoted}`: no command {command}"));
+                continue;
+            };
+            for flag in words.filter(|w| w.starts_with("--")) {
+                let flag = flag.split('=').next().unwrap();
+                if !target.contains(&format!("{flag} ")) && !target.contains(&format!("{flag}\n")) {
+                    wrong.push(format!("{name}: `{quoted}`: {command} has no {flag}"));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}

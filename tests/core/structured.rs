@@ -496,11 +496,7 @@ fn simulated_captures_calibrate_and_check_from_the_command_line() {
             "{name} differs"
         );
     }
-    let tiny = Grey {
-        width: 8,
-        height: 8,
-        data: vec![0; 64],
-    };
+    let tiny = Grey::new(8, 8, vec![0; 64]);
     std::fs::write(patterns.join("006.png"), tiny.png().unwrap()).unwrap();
     let (ok, _, err) = film("64x64");
     assert!(
@@ -616,13 +612,9 @@ async fn the_daemon_takes_captures_frame_by_frame_and_proposes_or_checks() {
         ("x", png(0), "n"),
         (
             "57",
-            omniwarp::structured::Grey {
-                width: 8,
-                height: 8,
-                data: vec![0; 64],
-            }
-            .png()
-            .unwrap(),
+            omniwarp::structured::Grey::new(8, 8, vec![0; 64])
+                .png()
+                .unwrap(),
             "body",
         ),
     ] {
@@ -1266,4 +1258,31 @@ async fn the_daemon_serves_the_xor_code_and_keeps_its_captures_apart() {
         (st, json(&body)["field"].as_str()),
         (StatusCode::BAD_REQUEST, Some("/code"))
     );
+}
+
+/// A 16-bit camera capture is decoded at 16 bits: two pixels 100/65535 apart share an 8-bit
+/// level, and the decoder must still tell them apart (they were cut to 8 bits before).
+#[test]
+fn a_sixteen_bit_capture_is_read_at_sixteen_bits() {
+    let levels: [u16; 2] = [1000, 1100];
+    let mut file = Vec::new();
+    let mut enc = png::Encoder::new(&mut file, 2, 1);
+    enc.set_color(png::ColorType::Grayscale);
+    enc.set_depth(png::BitDepth::Sixteen);
+    let mut w = enc.write_header().unwrap();
+    let bytes: Vec<u8> = levels.iter().flat_map(|v| v.to_be_bytes()).collect();
+    w.write_image_data(&bytes).unwrap();
+    w.finish().unwrap();
+    let read = Grey::decode(&file, "capture").unwrap();
+    assert_eq!(read.data, [4, 4], "the 8-bit view");
+    let step = read.level(1) - read.level(0);
+    assert!(
+        (step - 100.0 / 257.0).abs() < 1e-12,
+        "levels differ by {step}"
+    );
+    // Written back, the capture keeps its 16 bits; an 8-bit pattern stays 8-bit.
+    assert_eq!(Grey::decode(&read.png().unwrap(), "again").unwrap(), read);
+    let pattern = Grey::new(2, 1, vec![4, 4]);
+    let again = Grey::decode(&pattern.png().unwrap(), "pattern").unwrap();
+    assert_eq!((again.deep.is_none(), again.level(1)), (true, 4.0));
 }

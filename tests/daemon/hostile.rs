@@ -1101,6 +1101,9 @@ fn the_limits_are_documented_where_users_read_them() {
         l::PROPOSALS.to_string(),
         l::EXPORT_NODES.to_string(),
         omniwarp::server::STREAMS.to_string(),
+        omniwarp::server::FEEDS.to_string(),
+        omniwarp::server::RESERVE.to_string(),
+        omniwarp::server::CONNECTIONS.to_string(),
     ];
     // Numbers are written with thousands separators where they are long.
     let spaced = |n: &str| {
@@ -1121,7 +1124,13 @@ fn the_limits_are_documented_where_users_read_them() {
             );
         }
     }
-    for rule in ["--allow-host", "--allow-origin", "--memory-budget"] {
+    for rule in [
+        "--allow-host",
+        "--allow-origin",
+        "--memory-budget",
+        "--max-connections",
+        "Sec-Fetch-Site",
+    ] {
         assert!(page.contains(rule) && api.contains(rule), "{rule}");
     }
 }

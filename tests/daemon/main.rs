@@ -6,8 +6,10 @@ mod common;
 
 mod console;
 mod daemon;
+mod disconnect;
 mod durability;
 mod history;
 mod hostile;
+mod pressure;
 mod server;
 mod server_edit;

@@ -6,16 +6,25 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde_json::json;
 
+/// Why a request failed, with the status it answers.
 #[derive(Debug)]
 pub enum ApiError {
     /// 400: a query or body that cannot be used; `field` names it (JSON pointer for bodies).
-    Invalid { field: String, reason: String },
+    Invalid {
+        /// The query parameter, or the JSON pointer into the body.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// 401: a token is required.
     Unauthorized,
-    /// 404
+    /// 404, saying what was not found.
     NotFound(String),
     /// 412: the If-Match revision is stale; carries the current one.
-    Stale { current: u64 },
+    Stale {
+        /// The resource's current revision.
+        current: u64,
+    },
     /// 428: writes must say which revision they change.
     PreconditionRequired,
     /// 503: too many renders at once.
@@ -23,8 +32,11 @@ pub enum ApiError {
     /// Any other refusal with its status (403, 405, 408, 409, 413, 414, 415, 422, 431, 503):
     /// `field` names the header, parameter or body pointer at fault where there is one.
     Refused {
+        /// The status answered.
         status: StatusCode,
+        /// The header, parameter or body pointer at fault, where there is one.
         field: Option<String>,
+        /// Why, for the client.
         reason: String,
     },
     /// 500: logged, not detailed to the client.
@@ -32,6 +44,7 @@ pub enum ApiError {
 }
 
 impl ApiError {
+    /// A [`ApiError::Refused`] with `status`, naming `field` where there is one.
     pub fn refused(status: StatusCode, field: Option<&str>, reason: impl Into<String>) -> Self {
         ApiError::Refused {
             status,

@@ -7,14 +7,19 @@
 //! names and addresses, the address the server is bound to, `--allow-host` names); a request a
 //! browser sends from another origin carries `Origin`, which must be the daemon's own or an
 //! `--allow-origin` one; a body must be declared `application/json` (a form cannot send that
-//! without a CORS preflight, which only allowed origins pass). Bodies are read whole here, within
-//! a size limit and a deadline, so a client that sends slowly holds no route.
+//! without a CORS preflight, which only allowed origins pass). A page's `<img>` or `<script>`
+//! sends no `Origin`, but a browser marks it `Sec-Fetch-Site: cross-site`; those are refused
+//! too, or any page could keep the workers busy with renders and exports.
+//!
+//! The token is checked on the headers, before a byte of the body is read: a client without it
+//! must not get the daemon to buffer a 64 MiB upload first. Bodies are then read whole, within a
+//! size limit and a deadline, so a client that sends slowly holds no route.
 
 use super::state::{AppState, MAX_BODY};
 use crate::server::ApiError;
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
-use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use std::net::IpAddr;
@@ -173,9 +178,24 @@ pub async fn guard(
             format!("pages from `{o}` may not call this server (see --allow-origin)"),
         ));
     }
+    // A browser's request from another site that carries no Origin (an image, a script, a
+    // link's prefetch): `same-site` counts, as any port on a loopback name is the same site.
+    let fetch_site = header_str(h, HeaderName::from_static("sec-fetch-site"))?;
+    if origin.is_none()
+        && let Some(site) = fetch_site
+        && !["same-origin", "none"].contains(&site.trim())
+    {
+        return Err(forbidden(
+            "Sec-Fetch-Site",
+            format!("a page from another site ({site}) may not load from this server"),
+        ));
+    }
     let cors = origin.and_then(|o| HeaderValue::from_str(&o).ok());
     if req.method() == Method::OPTIONS {
         return Ok(preflight(cors));
+    }
+    if !authorized(&s, &req) {
+        return Err(ApiError::Unauthorized);
     }
     // Mesh uploads are OBJ text of their own size, camera captures images of theirs; every
     // other body is JSON.
@@ -243,6 +263,37 @@ pub async fn guard(
         h.append(header::VARY, HeaderValue::from_static("origin"));
     }
     Ok(resp)
+}
+
+/// With a token configured, every request but the console's own files must carry
+/// `Authorization: Bearer <token>`.
+fn authorized(s: &AppState, req: &Request) -> bool {
+    let Some(token) = &s.options.token else {
+        return true;
+    };
+    if is_console_file(req.method(), req.uri().path()) {
+        return true;
+    }
+    let given = req
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    // Constant-time comparison: the token is a secret.
+    given.is_some_and(|g| {
+        g.len() == token.len()
+            && g.bytes()
+                .zip(token.bytes())
+                .fold(0u8, |a, (x, y)| a | (x ^ y))
+                == 0
+    })
+}
+
+/// The console's own files load without a token: the page has to reach the browser before it
+/// can ask for one.
+fn is_console_file(method: &Method, path: &str) -> bool {
+    (method == Method::GET || method == Method::HEAD)
+        && (path == "/" || path == "/console" || path.starts_with("/console/"))
 }
 
 fn too_large(limit: usize) -> ApiError {

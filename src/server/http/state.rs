@@ -33,6 +33,10 @@ pub const WORKERS: usize = 2;
 /// memory until the client has read it, so a client that never reads cannot pile them up.
 pub const STREAMS: usize = 16;
 
+/// Change feeds open at once; more get 503. At most half the connection cap, so subscribers
+/// that never leave cannot take every connection.
+pub const FEEDS: usize = 256;
+
 /// How the daemon was started: who may call it and how much it may hold.
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -48,6 +52,9 @@ pub struct Options {
     /// Who the history records as making a change: the token's name (its file's name without
     /// the extension) when one is required, `local` otherwise.
     pub user: String,
+    /// Connections open at once (see [`crate::server::CONNECTIONS`]); lowered at start to what
+    /// the process's file limit allows.
+    pub connections: usize,
 }
 
 impl Default for Options {
@@ -58,12 +65,17 @@ impl Default for Options {
             allow_hosts: Vec::new(),
             allow_origins: Vec::new(),
             user: "local".into(),
+            connections: crate::server::CONNECTIONS,
         }
     }
 }
 
+/// What every request handler shares: the store, the options the daemon started with, and
+/// what is kept computed or in flight.
 pub struct AppState {
+    /// The rig and the channels' documents, kept durably.
     pub store: Store,
+    /// How the daemon was started (token, limits, budget).
     pub options: Options,
     /// The address the server listens on, once it does (the `Host` check allows it).
     pub bound: OnceLock<SocketAddr>,
@@ -75,11 +87,15 @@ pub struct AppState {
     pub workers: Arc<Semaphore>,
     /// Bounds the large responses in flight (see [`STREAMS`]).
     pub streams: Arc<Semaphore>,
+    /// Bounds the change feeds open at once (see [`FEEDS`]).
+    pub feeds: Arc<Semaphore>,
     /// Geometric warps and blend weights by channel and a hash of what they are computed from.
     pub warps: Mutex<HashMap<(String, u64), Arc<Geometry>>>,
     /// Effective warps by channel and a hash of the geometry's inputs and the tile screen.
     pub computed: Mutex<HashMap<(String, u64), Arc<Computed>>>,
+    /// Heavy jobs finished since start (`/v1/health`).
     pub jobs_done: AtomicU64,
+    /// Heavy jobs abandoned because their client went away (`/v1/health`).
     pub jobs_cancelled: AtomicU64,
     /// The GPU for previews (`?renderer=gpu`), opened on first use.
     pub gpu: std::sync::OnceLock<Option<Arc<GpuWarp>>>,
@@ -98,6 +114,8 @@ pub struct AppState {
 }
 
 impl AppState {
+    /// The state of a daemon serving `store`, with `token` required when given and default
+    /// options otherwise.
     pub fn new(store: Store, token: Option<String>) -> Arc<Self> {
         Self::with_options(
             store,
@@ -108,7 +126,9 @@ impl AppState {
         )
     }
 
+    /// The state of a daemon serving `store` with `options`.
     pub fn with_options(store: Store, options: Options) -> Arc<Self> {
+        let feeds = FEEDS.min(options.connections / 2);
         Arc::new(AppState {
             store,
             options,
@@ -117,6 +137,7 @@ impl AppState {
             stopping: watch::channel(false).0,
             workers: Arc::new(Semaphore::new(WORKERS)),
             streams: Arc::new(Semaphore::new(STREAMS)),
+            feeds: Arc::new(Semaphore::new(feeds)),
             warps: Mutex::new(HashMap::new()),
             computed: Mutex::new(HashMap::new()),
             jobs_done: AtomicU64::new(0),
@@ -136,6 +157,7 @@ impl AppState {
         self.gpu.get_or_init(GpuWarp::open).clone()
     }
 
+    /// Sends `change` to every change-feed subscriber (`/v1/events`).
     pub fn announce(&self, change: serde_json::Value) {
         // Nobody listening is fine.
         let _ = self.events.send(change.to_string());
@@ -181,7 +203,7 @@ impl Captures {
             .iter()
             .filter(|(k, _)| k.as_str() != id)
             .flat_map(|(_, v)| v.iter().flatten())
-            .map(|g| g.data.len())
+            .map(|g| g.bytes())
             .sum();
         let frames = map.entry(id.to_string()).or_default();
         frames.resize(len, None);
@@ -205,10 +227,10 @@ impl Captures {
             .enumerate()
             .filter(|(k, _)| *k != n)
             .flat_map(|(_, f)| f.iter())
-            .map(|g| g.data.len())
+            .map(|g| g.bytes())
             .sum();
         let limit = crate::limits::CAPTURE_BYTES;
-        if held + mine + frame.data.len() > limit {
+        if held + mine + frame.bytes() > limit {
             return Err(ApiError::Invalid {
                 field: "body".into(),
                 reason: format!(

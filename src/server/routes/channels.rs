@@ -18,6 +18,7 @@ use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
 use std::sync::Arc;
+use tokio::sync::OwnedMutexGuard;
 
 fn not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("no channel `{id}`"))
@@ -85,45 +86,53 @@ impl Part {
 
 /// Replaces a channel's state with `next` once the changed part is durable with its history
 /// row, then announces it. A plain write can be undone back to the revision it replaced.
+///
+/// The write, the swap in memory and the announcement run as one task that a client going away
+/// cannot stop: the handler's future is dropped when its connection closes, and a swap left
+/// to it would be skipped after a durable write, leaving memory behind the database. The
+/// channel stays locked (`held`) until the swap is done.
 pub async fn commit(
     s: &Arc<AppState>,
     id: &str,
-    held: &mut ChannelData,
+    mut held: OwnedMutexGuard<ChannelData>,
     next: ChannelData,
     part: Part,
     mut meta: Meta,
 ) -> Result<u64, ApiError> {
-    let (old, new) = (held.clone(), next.clone());
     let revision = part.of_revision(&next);
     if matches!(meta.action, "put" | "patch" | "delete") {
-        meta.undo_to = Some(part.of_revision(held));
+        meta.undo_to = Some(part.of_revision(&held));
     }
-    let (state, resource) = (s.clone(), part.resource(id));
+    let (state, resource, id) = (s.clone(), part.resource(id), id.to_string());
     // Turning two screens into JSON values and comparing them costs milliseconds: off the
     // runtime, with the write, and skipped where a tile edit changed only some features.
     tokio::task::spawn_blocking(move || {
-        let revisions = (part.of_revision(&old), part.of_revision(&new));
-        if part == Part::Tiles
-            && let Some(patch) = feature_patch(&old.tiles.value, &new.tiles.value)
-        {
-            let doc = || part.of(&new).1;
-            if state
-                .store
-                .db
-                .write_patch(&resource, revisions, &patch, &doc, &meta)?
-            {
-                return Ok(());
+        let old = &*held;
+        let revisions = (part.of_revision(old), part.of_revision(&next));
+        let patched = match feature_patch(&old.tiles.value, &next.tiles.value) {
+            Some(patch) if part == Part::Tiles => {
+                let doc = || part.of(&next).1;
+                state
+                    .store
+                    .db
+                    .write_patch(&resource, revisions, &patch, &doc, &meta)?
             }
+            _ => false,
+        };
+        if !patched {
+            let (before, after) = (part.of(old), part.of(&next));
+            state
+                .store
+                .save_doc(&resource, (before.0, &before.1), (after.0, &after.1), &meta)?;
         }
-        let (before, after) = (part.of(&old), part.of(&new));
-        state
-            .store
-            .save_doc(&resource, (before.0, &before.1), (after.0, &after.1), &meta)
+        *held = next;
+        state.announce(
+            serde_json::json!({"kind": part.kind(), "channel": id, "revision": revision}),
+        );
+        Ok::<_, ApiError>(())
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))??;
-    *held = next;
-    s.announce(serde_json::json!({"kind": part.kind(), "channel": id, "revision": revision}));
     Ok(revision)
 }
 
@@ -202,7 +211,7 @@ pub async fn put_content(
     canvas.view()?;
     canvas.centre(&s.store.snapshot().0)?;
     let d = data(&s, &id).await?;
-    let mut g = d.lock().await;
+    let g = d.lock_owned().await;
     fresh(g.content.revision, wanted)?;
     let revision = wanted + 1;
     let mut next = g.clone();
@@ -211,15 +220,7 @@ pub async fn put_content(
         value: canvas,
     };
     let request = Some(serde_json::to_value(&next.content.value).expect("canvases serialise"));
-    commit(
-        &s,
-        &id,
-        &mut g,
-        next,
-        Part::Content,
-        meta(&s, "put", request),
-    )
-    .await?;
+    commit(&s, &id, g, next, Part::Content, meta(&s, "put", request)).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 
@@ -290,7 +291,7 @@ async fn replace_tiles(
     action: &'static str,
 ) -> Result<Response, ApiError> {
     let d = data(s, id).await?;
-    let mut g = d.lock().await;
+    let g = d.lock_owned().await;
     fresh(g.tiles.revision, wanted)?;
     let revision = wanted + 1;
     let mut next = g.clone();
@@ -301,7 +302,7 @@ async fn replace_tiles(
             t
         }),
     };
-    commit(s, id, &mut g, next, Part::Tiles, meta(s, action, None)).await?;
+    commit(s, id, g, next, Part::Tiles, meta(s, action, None)).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 
@@ -336,7 +337,7 @@ pub async fn patch_tiles(
         });
     }
     let d = data(&s, &id).await?;
-    let mut g = d.lock().await;
+    let g = d.lock_owned().await;
     let current = g.tiles.revision;
     if current < wanted || (current > wanted && !patch.merge) {
         return Err(ApiError::Stale { current });
@@ -363,15 +364,7 @@ pub async fn patch_tiles(
         revision,
         value: Some(screen),
     };
-    commit(
-        &s,
-        &id,
-        &mut g,
-        next,
-        Part::Tiles,
-        meta(&s, "patch", request),
-    )
-    .await?;
+    commit(&s, &id, g, next, Part::Tiles, meta(&s, "patch", request)).await?;
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 

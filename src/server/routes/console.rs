@@ -11,7 +11,7 @@
 use crate::server::http::state::AppState;
 use axum::Router;
 use axum::extract::Path;
-use axum::http::{HeaderValue, Method, StatusCode, header};
+use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::get;
 use std::sync::Arc;
@@ -39,12 +39,6 @@ assets! {
 const POLICY: &str = "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; \
                       style-src 'self'; script-src 'self'; frame-ancestors 'none'; \
                       base-uri 'none'; form-action 'none'";
-
-/// Whether a request is for one of the console's files (served without the token).
-pub fn is_asset(method: &Method, path: &str) -> bool {
-    (method == Method::GET || method == Method::HEAD)
-        && (path == "/" || path == "/console" || path.starts_with("/console/"))
-}
 
 fn serve(name: &str) -> Response {
     let Some((_, mime, bytes)) = ASSETS.iter().find(|(n, _, _)| *n == name) else {

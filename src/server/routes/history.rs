@@ -238,7 +238,7 @@ async fn channel_step(
         .store
         .channel(&id)
         .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
-    let mut g = d.lock().await;
+    let g = d.lock_owned().await;
     let (current, _) = part.of(&g);
     if wanted != current {
         return Err(ApiError::Stale { current });
@@ -265,7 +265,7 @@ async fn channel_step(
             next.tiles.revision = revision;
         }
     }
-    commit(&s, &id, &mut g, next, part, meta).await?;
+    commit(&s, &id, g, next, part, meta).await?;
     Ok(tagged(
         serde_json::json!({"revision": revision, "from": to}),
         revision,

@@ -61,26 +61,31 @@ pub async fn commit_rig(
     rig: Rig,
     mut meta: Meta,
 ) -> Result<u64, ApiError> {
-    let _writer = s.store.rig_writer.lock().await;
+    let writer = s.store.rig_writer.clone().lock_owned().await;
     let (_, current) = s.store.snapshot();
     if wanted != current {
         return Err(ApiError::Stale { current });
     }
     let revision = current + 1;
     let state = s.clone();
-    let doc = rig.doc.clone();
     if matches!(meta.action, "put" | "apply") {
         meta.undo_to = Some(current);
     }
-    tokio::task::spawn_blocking(move || state.store.save_rig(&doc, revision, &meta))
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))??;
-    s.store.install(rig, revision);
-    // Cached warps are keyed by content; those of the old rig can only take memory now.
-    s.warps.lock().expect("cache lock").clear();
-    s.computed.lock().expect("cache lock").clear();
-    s.announce(serde_json::json!({"kind": "rig", "revision": revision}));
-    tracing::info!(revision, "rig updated");
+    // The write and the swap in memory are one task a client going away cannot stop (see
+    // `channels::commit`), and the next writer waits for both.
+    tokio::task::spawn_blocking(move || {
+        let _writer = writer;
+        state.store.save_rig(&rig.doc, revision, &meta)?;
+        state.store.install(rig, revision);
+        // Cached warps are keyed by content; those of the old rig can only take memory now.
+        state.warps.lock().expect("cache lock").clear();
+        state.computed.lock().expect("cache lock").clear();
+        state.announce(serde_json::json!({"kind": "rig", "revision": revision}));
+        tracing::info!(revision, "rig updated");
+        Ok::<_, ApiError>(())
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))??;
     Ok(revision)
 }
 
@@ -121,7 +126,14 @@ pub async fn channels(State(s): State<Arc<AppState>>) -> Response {
 /// server shuts down (the stream ends then, so shutting down does not wait on listeners).
 pub async fn events(
     State(s): State<Arc<AppState>>,
-) -> Sse<impl Stream<Item = Result<Event, std::convert::Infallible>>> {
+) -> Result<Sse<impl Stream<Item = Result<Event, std::convert::Infallible>>>, ApiError> {
+    let Ok(open) = s.feeds.clone().try_acquire_owned() else {
+        return Err(ApiError::refused(
+            axum::http::StatusCode::SERVICE_UNAVAILABLE,
+            None,
+            "the daemon holds as many change feeds open as it keeps; retry shortly",
+        ));
+    };
     let (_, now) = s.store.snapshot();
     let first = serde_json::json!({"kind": "rig", "revision": now}).to_string();
     let first = tokio_stream::once(Ok(Event::default().event("change").data(first)));
@@ -129,12 +141,14 @@ pub async fn events(
         .filter_map(|r| r.ok())
         .map(|c| Ok(Event::default().event("change").data(c)));
     let mut stopping = s.stopping.subscribe();
+    // The feed's place is held as long as its stream, which ends with the connection.
     let stop = async move {
+        let _open = open;
         let _ = stopping.wait_for(|&stop| stop).await;
     };
-    Sse::new(futures_util::StreamExt::take_until(
+    Ok(Sse::new(futures_util::StreamExt::take_until(
         first.chain(rest),
         Box::pin(stop),
     ))
-    .keep_alive(KeepAlive::default())
+    .keep_alive(KeepAlive::default()))
 }

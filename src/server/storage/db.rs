@@ -15,10 +15,10 @@
 //! cost their patches, not 100,000 copies of the screen — and an edit writes about a kilobyte,
 //! not the whole document (the current one is rebuilt the same way, once, at start-up).
 
-use rusqlite::{Connection, OptionalExtension, params};
+use rusqlite::{Connection, OptionalExtension, TransactionBehavior, params};
 use serde_json::Value;
 use std::path::Path;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// A full document is kept every this many revisions of a resource (and whenever the patch
 /// would be larger than the document).
@@ -43,11 +43,15 @@ const SCHEMA: &str = "
 /// One row of the history, as listed.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Row {
+    /// The row's place in the history, increasing with every write.
     pub seq: i64,
+    /// What was written: `rig`, `channels/<id>/content` or `channels/<id>/tiles`.
     pub resource: String,
+    /// The resource's revision after this write.
     pub revision: u64,
     /// Milliseconds since the Unix epoch.
     pub at_ms: i64,
+    /// Who wrote it: the token's name when one is required, `local` otherwise.
     pub who: String,
     /// create, migrate, put, patch, delete, apply, revert, undo or redo.
     pub action: String,
@@ -65,15 +69,34 @@ pub struct Row {
 /// What a write records besides the document.
 #[derive(Debug, Clone)]
 pub struct Meta {
+    /// Who writes (see [`Row::who`]).
     pub who: String,
+    /// The kind of write (see [`Row::action`]).
     pub action: &'static str,
+    /// What the client sent, when it is small.
     pub request: Option<Value>,
+    /// The revision an undo from this write goes back to.
     pub undo_to: Option<u64>,
+    /// The revision a redo from this write goes forward to.
     pub redo_to: Option<u64>,
 }
 
+/// The daemon's SQLite database (a file in the data directory, or in memory without one):
+/// the current documents, their history and the calibration proposals.
 pub struct Db {
     conn: Mutex<Connection>,
+    committed: Mutex<Option<CommitHook>>,
+}
+
+/// Called with the resource's name after each write is committed (see [`Db::on_commit`]).
+pub type CommitHook = Arc<dyn Fn(&str) + Send + Sync>;
+
+/// A write transaction, holding SQLite's write lock from its start: a deferred one starts as a
+/// read and fails at once with "database is locked" when another process (a backup, `sqlite3`)
+/// holds the lock, where an immediate one waits the busy timeout for it.
+fn write_transaction(conn: &mut Connection) -> crate::Result<rusqlite::Transaction<'_>> {
+    conn.transaction_with_behavior(TransactionBehavior::Immediate)
+        .map_err(fail)
 }
 
 fn fail(e: impl std::fmt::Display + 'static) -> crate::Error {
@@ -109,6 +132,7 @@ impl Db {
         conn.execute_batch(SCHEMA).map_err(fail)?;
         Ok(Db {
             conn: Mutex::new(conn),
+            committed: Mutex::new(None),
         })
     }
 
@@ -116,6 +140,7 @@ impl Db {
         self.conn.lock().expect("no query panics")
     }
 
+    /// The value kept under `key` in the database's own settings, if any.
     pub fn meta(&self, key: &str) -> crate::Result<Option<String>> {
         self.conn()
             .query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
@@ -123,6 +148,7 @@ impl Db {
             .map_err(fail)
     }
 
+    /// Keeps `value` under `key` in the database's own settings.
     pub fn set_meta(&self, key: &str, value: &str) -> crate::Result<()> {
         self.conn()
             .execute(
@@ -155,7 +181,7 @@ impl Db {
         meta: &Meta,
     ) -> crate::Result<()> {
         let mut conn = self.conn();
-        let tx = conn.transaction().map_err(fail)?;
+        let tx = write_transaction(&mut conn)?;
         let stored = revision_in(&tx, resource)?;
         // The caller's `before` is the current document whenever its revision is the stored
         // one; only otherwise is it rebuilt (a write after a recovery, say).
@@ -192,7 +218,10 @@ impl Db {
             params![resource, after.0 as i64],
         )
         .map_err(fail)?;
-        tx.commit().map_err(fail)
+        tx.commit().map_err(fail)?;
+        drop(conn);
+        self.committed(resource);
+        Ok(())
     }
 
     /// [`Db::write`] when the patch from revision `from` is already known (a tile edit that
@@ -207,7 +236,7 @@ impl Db {
         meta: &Meta,
     ) -> crate::Result<bool> {
         let mut conn = self.conn();
-        let tx = conn.transaction().map_err(fail)?;
+        let tx = write_transaction(&mut conn)?;
         if revision_in(&tx, resource)? != Some(from) {
             return Ok(false);
         }
@@ -221,7 +250,23 @@ impl Db {
         )
         .map_err(fail)?;
         tx.commit().map_err(fail)?;
+        drop(conn);
+        self.committed(resource);
         Ok(true)
+    }
+
+    /// Calls `hook` after every committed write from now on (`None`: no more). For tests that
+    /// must act at the moment a write is durable, such as a client going away right then.
+    #[doc(hidden)]
+    pub fn on_commit(&self, hook: Option<CommitHook>) {
+        *self.committed.lock().expect("hook lock") = hook;
+    }
+
+    fn committed(&self, resource: &str) {
+        let hook = self.committed.lock().expect("hook lock").clone();
+        if let Some(hook) = hook {
+            hook(resource);
+        }
     }
 
     /// The document of `resource` at `revision`, rebuilt from its history.
@@ -300,6 +345,7 @@ impl Db {
         Ok((rows as u64, bytes as u64))
     }
 
+    /// Keeps calibration proposal `id` (its JSON document), replacing one of that id.
     pub fn put_proposal(&self, id: u64, doc: &Value) -> crate::Result<()> {
         self.conn()
             .execute(
@@ -310,6 +356,7 @@ impl Db {
             .map_err(fail)
     }
 
+    /// Forgets calibration proposal `id`.
     pub fn delete_proposal(&self, id: u64) -> crate::Result<()> {
         self.conn()
             .execute("DELETE FROM proposals WHERE id = ?1", [id as i64])
@@ -317,6 +364,7 @@ impl Db {
             .map_err(fail)
     }
 
+    /// Every kept calibration proposal with its id.
     pub fn proposals(&self) -> crate::Result<Vec<(u64, Value)>> {
         let conn = self.conn();
         let mut st = conn

@@ -51,7 +51,9 @@ struct SavedRig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelData {
+    /// The content canvas the channel's media server plays, with its revision.
     pub content: Versioned<Canvas>,
+    /// The edited tile screen (`None`: the geometry's exact warp), with its revision.
     pub tiles: Versioned<Option<TileScreen>>,
 }
 
@@ -91,16 +93,22 @@ pub struct Proposal {
     pub outliers: Vec<usize>,
 }
 
+/// The daemon's state on disk and in memory: the rig as an immutable snapshot with its
+/// revision, each channel's documents, the calibration proposals and the meshes.
 pub struct Store {
+    /// The data directory; `None` keeps everything in memory.
     pub dir: Option<PathBuf>,
+    /// Where meshes named by the rig are read from.
     pub meshes: MeshDirs,
     /// Where everything is kept (in memory without a data directory).
     pub db: Db,
     current: RwLock<(Arc<Rig>, u64)>,
     /// Serialises rig writers, so revision checks and durability happen in order.
-    pub rig_writer: tokio::sync::Mutex<()>,
+    pub rig_writer: Arc<tokio::sync::Mutex<()>>,
     channels: Mutex<HashMap<String, Arc<tokio::sync::Mutex<ChannelData>>>>,
+    /// Calibration proposals waiting to be applied, by id.
     pub proposals: Mutex<HashMap<u64, Arc<Proposal>>>,
+    /// The id the next proposal gets.
     pub next_proposal: AtomicU64,
 }
 
@@ -114,6 +122,7 @@ pub struct OpenOptions {
     pub reset: bool,
     /// Warps of all channels together may take this many bytes.
     pub memory_budget: u64,
+    /// A read-only directory of meshes a rig may name besides uploaded ones (`--assets`).
     pub assets: Option<PathBuf>,
 }
 
@@ -243,6 +252,7 @@ impl Store {
         )
     }
 
+    /// Opens the store in `dir` (in memory without one), creating or migrating it as needed.
     pub fn open_with(dir: Option<PathBuf>, o: OpenOptions) -> crate::Result<Store> {
         let meshes = MeshDirs {
             data: dir.as_ref().map(|d| d.join("meshes")),
@@ -316,7 +326,7 @@ impl Store {
             meshes,
             db,
             current: RwLock::new((Arc::new(rig), revision)),
-            rig_writer: tokio::sync::Mutex::new(()),
+            rig_writer: Arc::new(tokio::sync::Mutex::new(())),
             channels: Mutex::new(channels),
             proposals: Mutex::new(proposals),
             next_proposal: AtomicU64::new(next),
@@ -334,6 +344,7 @@ impl Store {
         self.meshes.accept(RigDoc::parse(text)?, budget)
     }
 
+    /// The current rig and its revision.
     pub fn snapshot(&self) -> (Arc<Rig>, u64) {
         let g = self
             .current
@@ -381,6 +392,7 @@ impl Store {
         self.db.write(resource, Some(before), after, meta)
     }
 
+    /// Keeps proposal `p` durably.
     pub fn save_proposal(&self, p: &Proposal) -> crate::Result<()> {
         self.db.put_proposal(p.id, &json_of(p))
     }

@@ -1,0 +1,169 @@
+//! Writes disturbed from outside: a client that goes away while its write is being saved, and
+//! another process holding the database's write lock.
+//!
+//! A client that goes away while its write is being saved. The daemon answers a write only once
+//! it is durable; the client may be gone by then. What it wrote must then be the daemon's state
+//! in memory as it is in the database, so the next write based on it succeeds. The moment is
+//! forced, not timed: a hook in the database stops the write just after its commit while the
+//! test drops the request, as hyper does when the connection closes.
+
+use crate::common::server::{call, get, json, state, write};
+use axum::http::StatusCode;
+use std::sync::{Arc, Mutex, mpsc};
+use std::time::Duration;
+
+/// Far longer than any write here takes.
+const LONG: Duration = Duration::from_secs(30);
+
+/// Runs `req` against `s`, drops it the moment its write is committed, then lets the write go
+/// on.
+async fn gone_at_commit(
+    s: &Arc<omniwarp::server::AppState>,
+    req: axum::http::Request<axum::body::Body>,
+) {
+    let (committed, at_commit) = mpsc::channel::<()>();
+    let (release, released) = mpsc::channel::<()>();
+    let released = Arc::new(Mutex::new(released));
+    s.store.db.on_commit(Some(Arc::new(move |_: &str| {
+        let _ = committed.send(());
+        let _ = released.lock().unwrap().recv();
+    })));
+    let task = tokio::spawn({
+        let s = s.clone();
+        async move { call(&s, req).await }
+    });
+    let reached = tokio::task::spawn_blocking(move || at_commit.recv_timeout(LONG).is_ok())
+        .await
+        .unwrap();
+    if !reached {
+        s.store.db.on_commit(None);
+        let (status, _, body) = task.await.unwrap();
+        panic!(
+            "the write never reached its commit: {status} {}",
+            json(&body)
+        );
+    }
+    task.abort();
+    assert!(
+        task.await.unwrap_err().is_cancelled(),
+        "the request ended before its drop"
+    );
+    s.store.db.on_commit(None);
+    release.send(()).unwrap();
+}
+
+fn etag_revision(headers: &axum::http::HeaderMap) -> u64 {
+    let tag = headers["etag"].to_str().unwrap().trim_matches('"');
+    tag.rsplit('.').next().unwrap().parse().unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_write_whose_client_left_at_the_commit_is_kept_and_the_next_one_succeeds() {
+    let edit = |f: f64| {
+        serde_json::json!({"edits": [{"op": "set_feature", "column": 3, "row": 2, "f": f}]})
+            .to_string()
+    };
+    let tiles = "/v1/channels/left/tiles";
+    let content = "/v1/channels/left/content";
+    let s = state(None, None);
+    let (_, _, body) = call(&s, get(content)).await;
+    let canvas = json(&body)["content"].to_string();
+    let (_, _, rig) = call(&s, get("/v1/rig")).await;
+    let rig = json(&rig)["rig"].to_string();
+    // (what is dropped at its commit, its method and path, its body, the resource it writes)
+    let cases = [
+        ("PATCH tiles", "PATCH", tiles.to_string(), edit(0.5), tiles),
+        (
+            "undo tiles",
+            "POST",
+            format!("{tiles}/undo"),
+            String::new(),
+            tiles,
+        ),
+        (
+            "PUT content",
+            "PUT",
+            content.to_string(),
+            canvas.clone(),
+            content,
+        ),
+        (
+            "PUT rig",
+            "PUT",
+            "/v1/rig".to_string(),
+            rig.clone(),
+            "/v1/rig",
+        ),
+        (
+            "DELETE tiles",
+            "DELETE",
+            tiles.to_string(),
+            String::new(),
+            tiles,
+        ),
+    ];
+    for (what, method, path, body, uri) in cases {
+        let (_, headers, _) = call(&s, get(uri)).await;
+        let before = etag_revision(&headers);
+        gone_at_commit(&s, write(method, &path, Some(before), body)).await;
+        let (status, headers, _) = call(&s, get(uri)).await;
+        assert_eq!(status, StatusCode::OK, "{what}: GET {uri}");
+        let stored = s.store.db.current(uri.trim_start_matches("/v1/")).unwrap();
+        assert_eq!(
+            stored.map(|(r, _)| r),
+            Some(before + 1),
+            "{what}: the database"
+        );
+        assert_eq!(
+            etag_revision(&headers),
+            before + 1,
+            "{what}: the daemon does not show the write its database holds"
+        );
+        // The next write, based on the revision the database holds, succeeds.
+        let next = match uri {
+            "/v1/rig" => write("PUT", uri, Some(before + 1), rig.clone()),
+            u if u == content => write("PUT", uri, Some(before + 1), canvas.clone()),
+            _ => write("PATCH", uri, Some(before + 1), edit(0.25)),
+        };
+        let (status, _, body) = call(&s, next).await;
+        assert_eq!(
+            status,
+            StatusCode::OK,
+            "{what}: the next write: {}",
+            json(&body)
+        );
+    }
+}
+
+/// A backup or `sqlite3` holding SQLite's write lock for a moment delays a write; it does not
+/// fail it ("database is locked" at once was the answer while transactions began as reads).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_write_waits_for_another_process_holding_the_database_lock() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = state(Some(dir.path()), None);
+    let other =
+        rusqlite::Connection::open(dir.path().join(omniwarp::server::storage::db::FILE)).unwrap();
+    other.execute_batch("BEGIN IMMEDIATE").unwrap();
+    let edit =
+        serde_json::json!({"edits": [{"op": "set_feature", "column": 3, "row": 2, "f": 0.5}]});
+    let task = tokio::spawn({
+        let s = s.clone();
+        async move {
+            call(
+                &s,
+                write(
+                    "PATCH",
+                    "/v1/channels/left/tiles",
+                    Some(1),
+                    edit.to_string(),
+                ),
+            )
+            .await
+        }
+    });
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(!task.is_finished(), "the write did not wait for the lock");
+    other.execute_batch("COMMIT").unwrap();
+    let (status, _, body) = task.await.unwrap();
+    assert_eq!(status, StatusCode::OK, "{}", json(&body));
+}
