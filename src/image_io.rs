@@ -219,6 +219,36 @@ pub fn atomic_write(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> Result<()>,
 ) -> Result<()> {
+    place(path, Access::Shared, true, write).map(drop)
+}
+
+/// Who may read a file the daemon keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// Readable by everyone (0644), as a file the user asked for.
+    Shared,
+    /// Readable by its owner only (0600): the daemon's state says how a venue is set up.
+    Private,
+}
+
+/// [`atomic_write`] with the file's [`Access`]; with `replace` false, an existing `path` is
+/// left as it is and `Ok(false)` returned: the new file appears only if none was there, in
+/// one step (a hard link, as `O_EXCL`), so two writers racing for one name cannot both win.
+pub fn atomic_write_as(
+    path: &Path,
+    access: Access,
+    replace: bool,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<bool> {
+    place(path, access, replace, write)
+}
+
+fn place(
+    path: &Path,
+    access: Access,
+    replace: bool,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<bool> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -251,9 +281,10 @@ pub fn atomic_write(
         },
         || Ok(()),
     )?;
-    // Temporary files are private (0600); the result should be as readable as any new file.
+    // Temporary files are private (0600); a shared result should be as readable as any new
+    // file.
     #[cfg(unix)]
-    {
+    if access == Access::Shared {
         use std::os::unix::fs::PermissionsExt;
         let perms = std::fs::Permissions::from_mode(0o644);
         tmp.as_file()
@@ -268,10 +299,23 @@ pub fn atomic_write(
         to: path.to_path_buf(),
     };
     let mut tmp = Some(tmp);
+    let mut existed = false;
     take_step(path, rename, || {
         let t = tmp.take().expect("renamed once");
-        t.persist(path).map(drop).map_err(|e| e.error)
+        if replace {
+            return t.persist(path).map(drop).map_err(|e| e.error);
+        }
+        match t.persist_noclobber(path) {
+            Err(e) if e.error.kind() == std::io::ErrorKind::AlreadyExists => {
+                existed = true;
+                Ok(())
+            }
+            r => r.map(drop).map_err(|e| e.error),
+        }
     })?;
+    if existed {
+        return Ok(false);
+    }
     // The rename is durable only once the directory entry is; a failure here means the write
     // may not survive a crash, so it is not reported as done.
     take_step(
@@ -281,7 +325,7 @@ pub fn atomic_write(
         },
         || std::fs::File::open(dir)?.sync_all(),
     )?;
-    Ok(())
+    Ok(true)
 }
 
 /// Writes an 8-bit RGBA PNG.
@@ -433,10 +477,27 @@ pub fn png_bytes(img: &Raster<[u8; 4]>) -> Result<Vec<u8>> {
 /// Creates `dir` (and its parents) if missing; a new directory's entry is made durable by
 /// syncing its parent, so the first file written into it cannot vanish with it on power loss.
 pub fn create_dir_durably(dir: &Path) -> Result<()> {
+    make_dir_durably(dir, Access::Shared)
+}
+
+/// [`create_dir_durably`] for the daemon's own directories: the ones it creates are private
+/// (0700); one that exists is left as it is.
+pub fn create_private_dir_durably(dir: &Path) -> Result<()> {
+    make_dir_durably(dir, Access::Private)
+}
+
+fn make_dir_durably(dir: &Path, access: Access) -> Result<()> {
     if dir.is_dir() {
         return Ok(());
     }
-    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e))?;
+    let mut builder = std::fs::DirBuilder::new();
+    builder.recursive(true);
+    #[cfg(unix)]
+    if access == Access::Private {
+        use std::os::unix::fs::DirBuilderExt;
+        builder.mode(0o700);
+    }
+    builder.create(dir).map_err(|e| Error::file(dir, e))?;
     let parent = match dir.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),

@@ -73,16 +73,18 @@ fn parse_bytes(s: &str) -> Result<u64, String> {
         .ok_or_else(|| format!("`{s}` must be positive and below 16 EiB"))
 }
 
-/// A token other local users can read is everyone's on this machine.
-fn warn_if_readable_by_others(path: &std::path::Path) {
+/// A token other local users can read is everyone's on this machine, and a data directory
+/// they can read hands them the rig and its history. The daemon creates its own files
+/// private; one made by hand, or by an older version, is the operator's to change.
+fn warn_if_readable_by_others(path: &std::path::Path, what: &str, fix: &str) {
     use std::os::unix::fs::PermissionsExt;
     if let Ok(m) = std::fs::metadata(path)
         && m.permissions().mode() & 0o077 != 0
     {
         tracing::warn!(
-            file = %path.display(),
+            path = %path.display(),
             mode = format!("{:o}", m.permissions().mode() & 0o777),
-            "the token file can be read by other users; chmod 600 it"
+            "{what} can be read by other users; {fix} it"
         );
     }
 }
@@ -105,7 +107,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
             if t.len() < 16 {
                 bail!("--token-file: the token must be at least 16 characters");
             }
-            warn_if_readable_by_others(p);
+            warn_if_readable_by_others(p, "the token file", "chmod 600");
             Some(t)
         }
         None => None,
@@ -124,6 +126,9 @@ pub fn run(a: ServeArgs) -> Result<()> {
     } else {
         None
     };
+    if let Some(d) = &a.data {
+        warn_if_readable_by_others(d, "the data directory", "chmod 700");
+    }
     let store = Store::open_with(
         a.data.clone(),
         OpenOptions {

@@ -259,6 +259,109 @@ async fn mesh_screens_come_from_the_mesh_directories_only() {
     healthy(&s).await;
 }
 
+/// A fan of `n` triangles around the origin on the plane z = `z`.
+fn fan(n: usize, z: f64) -> String {
+    let mut obj = format!("v 0 0 {z}\n");
+    for i in 0..=n {
+        let a = i as f64 / n as f64 * std::f64::consts::TAU;
+        obj += &format!("v {} {} {z}\n", 3.0 * a.cos(), 3.0 * a.sin());
+    }
+    for i in 0..n {
+        obj += &format!("f 1 {} {}\n", i + 2, i + 3);
+    }
+    obj
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn of_two_uploads_racing_for_a_mesh_name_one_wins_and_the_other_is_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = state(Some(dir.path()), None);
+    // Small, so that both uploads reach the file at nearly the same moment; several rounds,
+    // since each is a race (the old check-then-rename lost the first).
+    let (a, b) = (fan(50, -3.0), fan(50, -4.0));
+    for round in 0..20 {
+        let name = format!("/v1/meshes/race{round}.obj");
+        let upload = |body: &str| {
+            call(
+                &s,
+                Request::put(&name)
+                    .body(Body::from(body.to_string()))
+                    .unwrap(),
+            )
+        };
+        let (first, second) = tokio::join!(upload(&a), upload(&b));
+        let mut got = [first.0, second.0];
+        got.sort();
+        assert_eq!(
+            got,
+            [StatusCode::CREATED, StatusCode::CONFLICT],
+            "round {round}: {}",
+            String::from_utf8_lossy(&second.2)
+        );
+        // The file holds the winner's upload whole.
+        let kept = std::fs::read_to_string(dir.path().join(format!("meshes/race{round}.obj")));
+        let winner = if first.0 == StatusCode::CREATED {
+            &a
+        } else {
+            &b
+        };
+        assert!(kept.unwrap() == *winner, "round {round}");
+    }
+}
+
+/// Every file and directory under `dir` that group or others can read or enter.
+fn shared_files(dir: &Path) -> Vec<String> {
+    use std::os::unix::fs::PermissionsExt;
+    let mut found = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        // A temporary file may be renamed away while the walk runs.
+        let Ok(meta) = std::fs::metadata(&d) else {
+            continue;
+        };
+        let mode = meta.permissions().mode();
+        if mode & 0o077 != 0 {
+            found.push(format!("{} {:o}", d.display(), mode & 0o777));
+        }
+        if d.is_dir() {
+            todo.extend(std::fs::read_dir(&d).unwrap().flatten().map(|e| e.path()));
+        }
+    }
+    found
+}
+
+#[tokio::test]
+async fn the_daemon_keeps_its_files_to_its_user() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("state");
+    let s = state(Some(&dir), None);
+    let upload = Request::put("/v1/meshes/wall.obj")
+        .body(Body::from(fan(8, -3.0)))
+        .unwrap();
+    assert_eq!(call(&s, upload).await.0, StatusCode::CREATED);
+    let (st, _, _) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert_eq!(st, StatusCode::OK);
+    // The keeper writes the warp a second after the channel's last change.
+    let since = Instant::now();
+    let kept = |d: std::fs::ReadDir| {
+        d.flatten()
+            .any(|e| !e.file_name().to_string_lossy().starts_with('.'))
+    };
+    while !std::fs::read_dir(dir.join("warps")).is_ok_and(kept) {
+        assert!(since.elapsed() < Duration::from_secs(30), "no warp kept");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    assert!(
+        names.iter().any(|n| n.ends_with("-wal")),
+        "the test must see the WAL: {names:?}"
+    );
+    assert_eq!(shared_files(&dir), Vec::<String>::new());
+}
+
 #[tokio::test]
 async fn a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_disk() {
     let dir = tempfile::tempdir().unwrap();

@@ -4,7 +4,7 @@
 //! name, once uploaded, keeps its contents (a different upload under it is a 409), so cached
 //! warps keyed by the rig document stay true to the mesh they were computed from.
 
-use crate::image_io::{atomic_write, create_dir_durably};
+use crate::image_io::{Access, atomic_write_as, create_private_dir_durably};
 use crate::server::ApiError;
 use crate::server::http::jobs::run_write;
 use crate::server::http::state::AppState;
@@ -72,22 +72,20 @@ pub async fn put(
         })?;
         let meshes = dir.join("meshes");
         let path = meshes.join(&name);
-        if let Ok(old) = std::fs::read(&path) {
-            return if old == body {
-                Ok(false)
-            } else {
-                Err(ApiError::refused(
-                    StatusCode::CONFLICT,
-                    Some("name"),
-                    format!("mesh `{name}` exists with other contents; upload under a new name"),
-                ))
-            };
-        }
-        create_dir_durably(&meshes)?;
-        atomic_write(&path, |f| {
+        create_private_dir_durably(&meshes)?;
+        // Created only if absent, in one step: of two uploads racing for a name, one makes
+        // the file and the other finds it.
+        let created = atomic_write_as(&path, Access::Private, false, |f| {
             std::io::Write::write_all(f, &body).map_err(|e| crate::Error::file(&path, e))
         })?;
-        Ok(true)
+        if created || std::fs::read(&path).is_ok_and(|old| old == body) {
+            return Ok(created);
+        }
+        Err(ApiError::refused(
+            StatusCode::CONFLICT,
+            Some("name"),
+            format!("mesh `{name}` exists with other contents; upload under a new name"),
+        ))
     })
     .await?;
     let status = if created {

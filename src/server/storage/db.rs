@@ -103,6 +103,19 @@ fn fail(e: impl std::fmt::Display + 'static) -> crate::Error {
     crate::Error::file(FILE, e)
 }
 
+/// Creates an empty database file readable by its owner only, unless one exists: SQLite
+/// gives its `-wal` and `-shm` files the database file's mode, so the history stays private.
+fn create_private(path: &Path) -> crate::Result<()> {
+    let mut o = std::fs::OpenOptions::new();
+    o.write(true).create_new(true);
+    #[cfg(unix)]
+    std::os::unix::fs::OpenOptionsExt::mode(&mut o, 0o600);
+    match o.open(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => Err(crate::Error::file(path, e)),
+        _ => Ok(()),
+    }
+}
+
 fn now_ms() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -113,6 +126,9 @@ impl Db {
     /// Opens (or creates) the database at `path`, in memory without one; a file that is not a
     /// sound SQLite database is an error, never replaced.
     pub fn open(path: Option<&Path>) -> crate::Result<Db> {
+        if let Some(p) = path {
+            create_private(p)?;
+        }
         let conn = match path {
             Some(p) => Connection::open(p).map_err(fail)?,
             None => Connection::open_in_memory().map_err(fail)?,

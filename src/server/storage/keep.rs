@@ -3,7 +3,7 @@
 //! channel has had no newer warp for [`QUIET`].
 
 use super::cache::Computed;
-use crate::image_io::atomic_write;
+use crate::image_io::{Access, atomic_write_as, create_private_dir_durably};
 use std::sync::{Arc, Condvar, Mutex, Once};
 use std::time::{Duration, Instant};
 
@@ -117,15 +117,15 @@ fn keep_warp(
     tiles_revision: u64,
 ) {
     let path = dir.join(warp_file(id, key));
-    let written = crate::image_io::create_dir_durably(&dir.join("warps"))
+    let written = create_private_dir_durably(&dir.join("warps"))
         .and_then(|_| computed.exr(rig_revision, tiles_revision))
         .and_then(|bytes| {
-            atomic_write(&path, |f| {
+            atomic_write_as(&path, Access::Private, true, |f| {
                 std::io::Write::write_all(f, bytes).map_err(|e| crate::Error::file(&path, e))
             })
         });
     match written {
-        Ok(()) => remove_older_warps(dir, id, &path),
+        Ok(_) => remove_older_warps(dir, id, &path),
         Err(e) => tracing::error!(error = %e, "could not keep the warp map"),
     }
 }

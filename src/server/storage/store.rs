@@ -18,7 +18,7 @@
 
 use super::canvas::Canvas;
 use super::db::{self, Db, Meta};
-use crate::image_io::{create_dir_durably, remove_leftovers};
+use crate::image_io::{create_private_dir_durably, remove_leftovers};
 use crate::rig::{Rig, RigDoc};
 use crate::tiles::TileScreen;
 use serde::de::DeserializeOwned;
@@ -260,7 +260,7 @@ impl Store {
         };
         let db = match &dir {
             Some(d) => {
-                std::fs::create_dir_all(d).map_err(|e| crate::Error::file(d, e))?;
+                create_private_dir_durably(d)?;
                 for sub in ["", "warps", "meshes"] {
                     let n = remove_leftovers(&d.join(sub));
                     if n > 0 {
@@ -551,7 +551,7 @@ fn migrate_files(dir: &Path, db: &Db, meshes: &MeshDirs, o: &OpenOptions) -> cra
         for name in ["rig.json", "rig.json.prev", "channels", "proposals"] {
             let from = dir.join(name);
             if from.exists() {
-                create_dir_durably(&to)?;
+                create_private_dir_durably(&to)?;
                 std::fs::rename(&from, to.join(name)).map_err(|e| crate::Error::file(&from, e))?;
             }
         }
