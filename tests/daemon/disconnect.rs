@@ -179,3 +179,116 @@ async fn a_write_waits_for_another_process_holding_the_database_lock() {
     let (status, _, body) = task.await.unwrap();
     assert_eq!(status, StatusCode::OK, "{}", json(&body));
 }
+
+/// The daemon on a 4 MiB tmpfs of its own, mounted in a user and mount namespace (`unshare`),
+/// so the test needs no privilege; `None` where the machine does not allow that.
+fn on_a_small_disk() -> Option<(std::process::Child, std::net::SocketAddr, tempfile::TempDir)> {
+    use std::io::BufRead;
+    use std::process::{Command, Stdio};
+    let mount = "mount -t tmpfs -o size=4m tmpfs \"$0\"";
+    let root = tempfile::tempdir().unwrap();
+    let can = Command::new("unshare")
+        .args(["--user", "--map-root-user", "--mount", "sh", "-c", mount])
+        .arg(root.path())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !can {
+        return None;
+    }
+    let serve =
+        format!("{mount} && exec \"$1\" serve --bind 127.0.0.1:0 --data \"$0/state\" --demo");
+    let mut child = Command::new("unshare")
+        .args(["--user", "--map-root-user", "--mount", "sh", "-c", &serve])
+        .arg(root.path())
+        .arg(env!("CARGO_BIN_EXE_omniwarp"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let Some(addr) = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .and_then(|a| a.parse().ok())
+    else {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("the daemon on a small disk did not start: {line:?}");
+    };
+    // The mount point lives as long as the daemon: removed, its tmpfs would go with it.
+    Some((child, addr, root))
+}
+
+/// A full disk is the operator's to fix, and the client's to hear about: 507 naming the disk,
+/// for a file the daemon writes (a mesh) and for its database alike, with nothing half-written
+/// and the last acknowledged write still served.
+#[test]
+fn a_full_disk_is_answered_507_and_keeps_what_was_acknowledged() {
+    use omniwarp::server::client::Client;
+    let Some((mut child, addr, _mount_point)) = on_a_small_disk() else {
+        eprintln!("skipped: this machine does not let a test mount a small tmpfs (unshare)");
+        return;
+    };
+    let mut c = Client::new(addr, None);
+    let full = |r: &omniwarp::server::client::Reply, what: &str| {
+        assert_eq!(r.status, 507, "{what}: {}", r.json());
+        assert!(
+            r.json()["error"].as_str().unwrap().contains("disk"),
+            "{what}"
+        );
+    };
+    // Meshes fill the disk (each about 0.5 MiB of text).
+    let mut answer = None;
+    for i in 0..40 {
+        let obj = crate::hostile::fan(8000, -3.0 - i as f64 * 0.01);
+        let r = c
+            .send("PUT", &format!("/v1/meshes/m{i}.obj"), &[], obj.as_bytes())
+            .unwrap();
+        if r.status != 201 {
+            answer = Some(r);
+            break;
+        }
+    }
+    full(&answer.expect("4 MiB held 40 meshes"), "a mesh upload");
+    // Then the database: edits until one does not fit.
+    let tiles = "/v1/channels/centre/tiles";
+    let mut acknowledged = None;
+    let mut refused = None;
+    for i in 0..500 {
+        let revision = c.get(tiles).unwrap().revision().unwrap();
+        let f = 0.3 + i as f64 * 1e-3;
+        let edit = serde_json::json!({"edits": [
+            {"op": "set_feature", "column": 3, "row": 2, "f": f}
+        ]});
+        let tag = format!("\"{revision}\"");
+        let r = c
+            .send(
+                "PATCH",
+                tiles,
+                &[("If-Match", &tag), ("Content-Type", "application/json")],
+                edit.to_string().as_bytes(),
+            )
+            .unwrap();
+        match r.status {
+            200 => acknowledged = Some((r.revision().unwrap(), f)),
+            _ => {
+                refused = Some(r);
+                break;
+            }
+        }
+    }
+    full(&refused.expect("the disk never filled"), "a tile edit");
+    let (revision, f) = acknowledged.expect("no edit fitted at all");
+    let now = c.get(tiles).unwrap();
+    assert_eq!(now.revision(), Some(revision));
+    let layout = &now.json()["tiles"]["layout"];
+    let columns = layout["columns"].as_u64().unwrap() as usize;
+    assert_eq!(layout["features"][2 * columns + 3]["f"].as_f64(), Some(f));
+    assert_eq!(c.get("/v1/health").unwrap().status, 200);
+    child.kill().unwrap();
+    child.wait().unwrap();
+}

@@ -260,7 +260,7 @@ async fn mesh_screens_come_from_the_mesh_directories_only() {
 }
 
 /// A fan of `n` triangles around the origin on the plane z = `z`.
-fn fan(n: usize, z: f64) -> String {
+pub(crate) fn fan(n: usize, z: f64) -> String {
     let mut obj = format!("v 0 0 {z}\n");
     for i in 0..=n {
         let a = i as f64 / n as f64 * std::f64::consts::TAU;

@@ -67,6 +67,21 @@ impl From<crate::Error> for ApiError {
                 None,
                 "the work was cancelled",
             ),
+            // Nothing was written (the transaction rolled back, or the temporary file was
+            // removed): the client can retry once the operator has made room.
+            other
+                if matches!(
+                    other.io_kind(),
+                    Some(std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded)
+                ) =>
+            {
+                tracing::error!(error = %other, "a write found the disk full");
+                ApiError::refused(
+                    StatusCode::INSUFFICIENT_STORAGE,
+                    None,
+                    "the disk holding the daemon's data is full; nothing was written",
+                )
+            }
             other => ApiError::Internal(other.to_string()),
         }
     }

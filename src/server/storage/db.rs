@@ -100,6 +100,18 @@ fn write_transaction(conn: &mut Connection) -> crate::Result<rusqlite::Transacti
 }
 
 fn fail(e: impl std::fmt::Display + 'static) -> crate::Error {
+    // SQLite says "database or disk is full" with its own code, not the system's: carried as
+    // the I/O kind, so the answer can say the disk is full rather than "internal error".
+    let full = (&e as &dyn std::any::Any)
+        .downcast_ref::<rusqlite::Error>()
+        .and_then(rusqlite::Error::sqlite_error_code)
+        == Some(rusqlite::ErrorCode::DiskFull);
+    if full {
+        return crate::Error::file(
+            FILE,
+            std::io::Error::new(std::io::ErrorKind::StorageFull, e.to_string()),
+        );
+    }
     crate::Error::file(FILE, e)
 }
 
