@@ -46,6 +46,10 @@ pub const CANVAS_SIDE: u32 = 65535;
 pub const MIN_FOV_DEG: f64 = 0.01;
 /// Zoom factor range of a view.
 pub const ZOOM: (f64, f64) = (1e-3, 1e3);
+/// Largest magnitude of a tile feature's custom value `f`, and largest `scale`: past them the
+/// values overflow the f32 the renderer interpolates in (1e308 became inf, then NaN between
+/// features).
+pub const FEATURE_VALUE: f64 = 1e3;
 /// Largest mesh screen file (and upload), bytes, and its triangles.
 pub const MESH_BYTES: u64 = 64 << 20;
 /// Triangles of a mesh screen (an OBJ file or upload).

@@ -51,20 +51,20 @@ impl Tolerance {
                 ),
             )
         };
-        let (number, unit) = text
-            .find(|c: char| c.is_ascii_alphabetic())
-            .map(|k| text.split_at(k))
+        // The unit is a suffix, not the first letter: `1e-3px` has an exponent.
+        let (number, unit) = ["deg", "rad", "px"]
+            .into_iter()
+            .find_map(|u| text.strip_suffix(u).map(|n| (n, u)))
             .ok_or_else(bad)?;
         let v: f64 = number.trim().parse().map_err(|_| bad())?;
         if !(v.is_finite() && v > 0.0) {
             return Err(bad());
         }
-        match unit {
-            "deg" => Ok(Tolerance::Angle(v.to_radians())),
-            "rad" => Ok(Tolerance::Angle(v)),
-            "px" => Ok(Tolerance::Pixels(v)),
-            _ => Err(bad()),
-        }
+        Ok(match unit {
+            "deg" => Tolerance::Angle(v.to_radians()),
+            "rad" => Tolerance::Angle(v),
+            _ => Tolerance::Pixels(v),
+        })
     }
 
     /// The tolerance for people: an angle in degrees (`0.05°`) or pixels (`0.5 px`).

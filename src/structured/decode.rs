@@ -63,6 +63,18 @@ pub struct Rejected {
     pub edge: usize,
 }
 
+/// In words, for error messages: `12034 dark, 310 flat, 4 inconsistent, 0 outside, 0 noisy,
+/// 88 on an edge`.
+impl std::fmt::Display for Rejected {
+    fn fmt(&self, out: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            out,
+            "{} dark, {} flat, {} inconsistent, {} outside, {} noisy, {} on an edge",
+            self.dark, self.flat, self.inconsistent, self.outside, self.noisy, self.edge
+        )
+    }
+}
+
 /// The decoded map, one entry per camera pixel.
 #[derive(Debug, Clone)]
 pub struct Decoded {

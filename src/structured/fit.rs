@@ -94,7 +94,7 @@ pub fn camera_pose_from_projector(
             "captures",
             format!(
                 "only {} camera pixels of the posing projector `{}` were decoded on the wall \
-                 (rejected: {:?}); is it lit and in the camera's view?",
+                 (rejected: {}); is it lit and in the camera's view?",
                 markers.len(),
                 projector.id,
                 decoded.rejected
@@ -192,7 +192,7 @@ pub fn calibrate_decoded(
         return Err(Error::invalid(
             "captures",
             format!(
-                "only {} camera pixels were decoded on the wall (rejected: {:?}); is the \
+                "only {} camera pixels were decoded on the wall (rejected: {}); is the \
                  projector lit and in view, and the camera's pose right?",
                 found.len(),
                 decoded.rejected

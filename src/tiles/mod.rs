@@ -355,6 +355,15 @@ impl TileScreen {
     }
 }
 
+/// A value for an error message: 1e308 as that, not as 309 digits.
+fn shown(v: f64) -> String {
+    if v.abs() < 1e6 {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
+
 fn check_feature(name: &str, f: &Feature) -> Result<()> {
     let fields = [
         ("x", f.x),
@@ -395,10 +404,17 @@ fn check_feature(name: &str, f: &Feature) -> Result<()> {
             format!("must lie in (0, 1], got {}", f.weight),
         ));
     }
-    if f.scale <= 0.0 {
+    let most = crate::limits::FEATURE_VALUE;
+    if !(f.scale > 0.0 && f.scale <= most) {
         return Err(Error::invalid(
             format!("{name}.scale"),
-            format!("must be positive, got {}", f.scale),
+            format!("must lie in (0, {most}], got {}", shown(f.scale)),
+        ));
+    }
+    if f.f.abs() > most {
+        return Err(Error::invalid(
+            format!("{name}.f"),
+            format!("must lie in [−{most}, {most}], got {}", shown(f.f)),
         ));
     }
     Ok(())

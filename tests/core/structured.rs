@@ -871,6 +871,9 @@ fn a_camera_posed_from_a_calibrated_projector_calibrates_its_neighbour() {
     };
     let e = camera_pose_from_projector(&dark, &guess, &front, &rig.doc.screen, 5000).unwrap_err();
     assert!(e.to_string().contains("only 0 camera pixels"), "{e}");
+    // Why, in words (not Rust's `Rejected { dark: … }`).
+    assert!(e.to_string().contains(" dark, "), "{e}");
+    assert!(!e.to_string().contains('{'), "{e}");
 
     let calibrate = |pose_channel: &str| {
         let out = dir.path().join("right.json");

@@ -292,3 +292,49 @@ fn a_full_disk_is_answered_507_and_keeps_what_was_acknowledged() {
     child.kill().unwrap();
     child.wait().unwrap();
 }
+
+/// A proposal whose save fails (here: another process holds the database past the busy
+/// timeout) uses up no id: the next one saved gets it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_proposal_that_could_not_be_saved_uses_up_no_id() {
+    let dir = tempfile::tempdir().unwrap();
+    // A cylinder: points on a flat wall cannot calibrate free intrinsics.
+    let s = crate::common::server::state_with(
+        Some(dir.path()),
+        None,
+        crate::common::server::demo_rig(),
+    );
+    let rig = s.store.snapshot().0;
+    let ch = rig.channel("left").unwrap();
+    let (w, h) = (f64::from(ch.width), f64::from(ch.height));
+    let mut points = Vec::new();
+    for j in 0..30 {
+        for i in 0..40 {
+            let q = [
+                (0.5 + f64::from(i)) * w / 40.0,
+                (0.5 + f64::from(j)) * h / 30.0,
+            ];
+            if let Some(p) = rig.wall_point(ch, q) {
+                points.push(serde_json::json!({"pixel": q, "world": p.to_array()}));
+            }
+        }
+    }
+    let body = serde_json::json!({"points": points}).to_string();
+    let propose = || {
+        call(
+            &s,
+            write("POST", "/v1/channels/left/calibration", None, body.clone()),
+        )
+    };
+    let other =
+        rusqlite::Connection::open(dir.path().join(omniwarp::server::storage::db::FILE)).unwrap();
+    other.execute_batch("BEGIN EXCLUSIVE").unwrap();
+    let (status, _, failed) = propose().await;
+    assert!(status.is_server_error(), "{status}: {}", json(&failed));
+    other.execute_batch("COMMIT").unwrap();
+    let (status, _, saved) = propose().await;
+    assert_eq!(status, StatusCode::CREATED);
+    let (_, _, first) = call(&s, get("/v1/proposals/1")).await;
+    assert_eq!(json(&first)["id"], 1);
+    assert_eq!(json(&saved)["id"], 1);
+}

@@ -363,6 +363,52 @@ async fn the_daemon_keeps_its_files_to_its_user() {
 }
 
 #[tokio::test]
+async fn numbers_a_client_writes_are_read_strictly() {
+    let s = state(None, None);
+    // A frame number is digits: `+1` is not frame 1.
+    for path in [
+        "/v1/channels/left/pattern/+1",
+        "/v1/channels/left/pattern/%201",
+    ] {
+        let (st, _, body) = call(&s, get(path)).await;
+        assert_eq!(st, StatusCode::BAD_REQUEST, "{path}");
+        assert_eq!(json(&body)["field"], "n", "{path}");
+    }
+    let capture = Request::put("/v1/channels/left/captures/+1")
+        .header(header::CONTENT_TYPE, "image/png")
+        .body(Body::from(vec![0u8; 8]))
+        .unwrap();
+    let (st, _, body) = call(&s, capture).await;
+    assert_eq!(st, StatusCode::BAD_REQUEST);
+    assert_eq!(json(&body)["field"], "n");
+    // A feature's custom value and zoom within what the renderer's f32 holds.
+    for (field, value) in [("f", 1e308), ("f", -2e3), ("scale", 1e308)] {
+        let edit = serde_json::json!({"edits": [
+            {"op": "set_feature", "column": 3, "row": 2, field: value}
+        ]});
+        let (st, _, body) = call(
+            &s,
+            write(
+                "PATCH",
+                "/v1/channels/left/tiles",
+                Some(1),
+                edit.to_string(),
+            ),
+        )
+        .await;
+        let body = json(&body);
+        assert_eq!(st, StatusCode::BAD_REQUEST, "{field} {value}: {body}");
+        assert!(
+            body["field"]
+                .as_str()
+                .unwrap()
+                .ends_with(&format!("/{field}")),
+            "{field} {value}: {body}"
+        );
+    }
+}
+
+#[tokio::test]
 async fn a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_disk() {
     let dir = tempfile::tempdir().unwrap();
     let s = state(Some(dir.path()), None);
@@ -1203,6 +1249,7 @@ fn the_limits_are_documented_where_users_read_them() {
         l::CALIBRATION_POINTS.to_string(),
         l::PROPOSALS.to_string(),
         l::EXPORT_NODES.to_string(),
+        l::FEATURE_VALUE.to_string(),
         omniwarp::server::STREAMS.to_string(),
         omniwarp::server::FEEDS.to_string(),
         omniwarp::server::RESERVE.to_string(),

@@ -458,7 +458,15 @@ fn tolerances_parse_with_their_unit_or_name_the_field() {
         Tolerance::Angle(a) => assert!((a - 2f64.to_radians()).abs() < 1e-15),
         other => panic!("{other:?}"),
     }
-    for bad in ["", "5", "-1px", "0px", "nanpx", "1m", "px", "infdeg"] {
+    // An exponent is part of the number, not the unit.
+    assert_eq!(Tolerance::parse("1e-3px").unwrap(), Tolerance::Pixels(1e-3));
+    assert_eq!(
+        Tolerance::parse("2.5E-4rad").unwrap(),
+        Tolerance::Angle(2.5e-4)
+    );
+    for bad in [
+        "", "5", "-1px", "0px", "nanpx", "1m", "px", "infdeg", "1e-3", "1epx",
+    ] {
         let e = Tolerance::parse(bad).unwrap_err().to_string();
         assert!(e.contains("tolerance"), "{bad}: {e}");
     }

@@ -64,12 +64,9 @@ pub async fn keep_offer(
     resolution: [u32; 2],
     cal: &crate::calibration::Calibration,
 ) -> Result<Proposal, ApiError> {
-    let pid = s
-        .store
-        .next_proposal
-        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let proposal = Proposal {
-        id: pid,
+        // The store gives the id as it saves.
+        id: 0,
         channel: id.to_string(),
         rig_revision,
         proposed: cal.channel_doc(id, resolution),
@@ -87,10 +84,11 @@ pub async fn keep_offer(
         residuals: cal.fit.residuals.clone(),
         outliers: cal.fit.outliers.clone(),
     };
-    let (state, copy) = (s.clone(), proposal.clone());
-    tokio::task::spawn_blocking(move || state.store.save_proposal(&copy))
+    let state = s.clone();
+    let proposal = tokio::task::spawn_blocking(move || state.store.save_new_proposal(proposal))
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))??;
+    let pid = proposal.id;
     for old in s.store.keep_proposal(proposal.clone()) {
         s.announce(serde_json::json!({"kind": "proposal_dropped", "id": old}));
     }

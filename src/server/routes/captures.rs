@@ -178,6 +178,19 @@ pub async fn delete_captures(
     Ok(Json(serde_json::json!({"dropped": dropped})).into_response())
 }
 
+/// A frame number as a path segment: decimal digits only (`+1` or ` 1` is not a name the
+/// pattern's URLs use, so it is not one a capture is filed under).
+pub(super) fn frame_number(n: &str, set: &PatternSet) -> Result<usize, ApiError> {
+    n.bytes()
+        .all(|b| b.is_ascii_digit())
+        .then(|| n.parse().ok())
+        .flatten()
+        .ok_or_else(|| ApiError::Invalid {
+            field: "n".into(),
+            reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
+        })
+}
+
 pub async fn put_capture(
     State(s): State<Arc<AppState>>,
     Path((id, n)): Path<(String, String)>,
@@ -186,10 +199,7 @@ pub async fn put_capture(
 ) -> Result<Response, ApiError> {
     let set = sequence(&s, &id, q.named())?;
     let key = slot(&id, q.view.as_deref(), &set, "view")?;
-    let n: usize = n.parse().map_err(|_| ApiError::Invalid {
-        field: "n".into(),
-        reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
-    })?;
+    let n = frame_number(&n, &set)?;
     set.frame(n, "n")?;
     let grey = run_job(&s, move |_| Ok(Grey::decode(&body, "body")?)).await?;
     s.captures.put(&key, n, set.len(), grey)?;

@@ -134,10 +134,7 @@ pub async fn pattern(
         at: "",
     };
     let set = super::captures::sequence(&s, &id, named)?;
-    let n: usize = n.parse().map_err(|_| ApiError::Invalid {
-        field: "n".into(),
-        reason: format!("must be a frame number, 0–{}, got `{n}`", set.len() - 1),
-    })?;
+    let n = super::captures::frame_number(&n, &set)?;
     let frame = set.frame(n, "n")?;
     let etag = format!(
         "\"pattern-{}x{}-p{}-{}-{n}\"",

@@ -25,7 +25,6 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex, RwLock};
 
 /// A value and its revision, as stored.
@@ -108,8 +107,9 @@ pub struct Store {
     channels: Mutex<HashMap<String, Arc<tokio::sync::Mutex<ChannelData>>>>,
     /// Calibration proposals waiting to be applied, by id.
     pub proposals: Mutex<HashMap<u64, Arc<Proposal>>>,
-    /// The id the next proposal gets.
-    pub next_proposal: AtomicU64,
+    /// The id the next proposal gets, taken only by a proposal that is saved (see
+    /// [`Store::save_new_proposal`]), so ids run without gaps.
+    next_proposal: Mutex<u64>,
 }
 
 /// How a store is opened.
@@ -329,7 +329,7 @@ impl Store {
             rig_writer: Arc::new(tokio::sync::Mutex::new(())),
             channels: Mutex::new(channels),
             proposals: Mutex::new(proposals),
-            next_proposal: AtomicU64::new(next),
+            next_proposal: Mutex::new(next),
         })
     }
 
@@ -395,6 +395,16 @@ impl Store {
     /// Keeps proposal `p` durably.
     pub fn save_proposal(&self, p: &Proposal) -> crate::Result<()> {
         self.db.put_proposal(p.id, &json_of(p))
+    }
+
+    /// Gives `p` the next proposal id and saves it; the id is used up only if the save
+    /// succeeds.
+    pub fn save_new_proposal(&self, mut p: Proposal) -> crate::Result<Proposal> {
+        let mut next = self.next_proposal.lock().expect("proposal id lock");
+        p.id = *next;
+        self.save_proposal(&p)?;
+        *next += 1;
+        Ok(p)
     }
 
     /// Keeps `p` and drops the oldest proposals beyond [`crate::limits::PROPOSALS`] (from the
