@@ -58,6 +58,9 @@ pub const MESH_TRIANGLES: usize = 4_000_000;
 pub const CAPTURE_BODY: u64 = 64 << 20;
 /// Camera captures the daemon holds at once over all channels, bytes (one byte per pixel).
 pub const CAPTURE_BYTES: usize = 1 << 30;
+/// Capture sequences (channel, view, period and code) the daemon holds at once: each costs
+/// bookkeeping beyond its pixels.
+pub const CAPTURE_SLOTS: usize = 64;
 /// Lines or values in a lens file, a PFM or a Bourke mesh, as a reader accepts them.
 pub const FILE_VALUES: u64 = 1 << 26;
 

@@ -408,6 +408,86 @@ async fn numbers_a_client_writes_are_read_strictly() {
     }
 }
 
+/// Uploads `frame` as frame `n` of channel `id`'s captures, under `view` if given.
+async fn put_capture(
+    s: &Arc<AppState>,
+    id: &str,
+    n: usize,
+    view: Option<&str>,
+    frame: &omniwarp::structured::Grey,
+) -> (StatusCode, serde_json::Value) {
+    let query = view.map_or(String::new(), |v| format!("?view={v}"));
+    let req = Request::put(format!("/v1/channels/{id}/captures/{n}{query}"))
+        .header(header::CONTENT_TYPE, "image/png")
+        .body(Body::from(frame.png().unwrap()))
+        .unwrap();
+    let (st, _, body) = call(s, req).await;
+    (st, json(&body))
+}
+
+#[tokio::test]
+async fn captures_go_with_their_channel() {
+    let s = demo_state();
+    let tiny = omniwarp::structured::Grey::new(64, 64, vec![0; 64 * 64]);
+    assert_eq!(
+        put_capture(&s, "right", 0, None, &tiny).await.0,
+        StatusCode::OK
+    );
+    assert_eq!(s.captures.held(), 64 * 64);
+    // A rig without `right`: its captures can be neither decoded nor deleted now.
+    let mut doc = rig_body(&s);
+    doc["channels"]
+        .as_array_mut()
+        .unwrap()
+        .retain(|c| c["id"] != "right");
+    let (st, body) = put_rig(&s, &doc).await;
+    assert_eq!(st, StatusCode::OK, "{body}");
+    assert_eq!(
+        s.captures.held(),
+        0,
+        "the removed channel's captures are still held"
+    );
+}
+
+#[tokio::test]
+async fn a_capture_sequence_that_could_never_be_held_whole_is_refused_at_its_first_frame() {
+    let s = demo_state();
+    let (_, _, status) = call(&s, get("/v1/channels/left/captures")).await;
+    let frames = json(&status)["frames"].as_u64().unwrap() as usize;
+    // The smallest square frame whose whole sequence is above the cap, and still within the
+    // pixel limit of one frame (so only the cap can refuse it).
+    let side = ((omniwarp::limits::CAPTURE_BYTES / frames) as f64).sqrt() as u32 + 1;
+    assert!(
+        (side as usize).pow(2) <= omniwarp::structured::CAPTURE_PIXELS,
+        "{frames} frames of {side}² fit the cap: the test needs a longer sequence"
+    );
+    let big = omniwarp::structured::Grey::new(side, side, vec![0; (side * side) as usize]);
+    let (st, body) = put_capture(&s, "left", 0, None, &big).await;
+    assert_eq!(st, StatusCode::BAD_REQUEST, "{body}");
+    assert_eq!(body["field"], "body");
+    assert!(
+        body["error"].as_str().unwrap().contains("sequence"),
+        "{body}"
+    );
+    assert_eq!(s.captures.held(), 0);
+}
+
+#[tokio::test]
+async fn the_captures_held_at_once_are_bounded_in_sequences_too() {
+    let s = demo_state();
+    let one = omniwarp::structured::Grey::new(2, 2, vec![0; 4]);
+    for v in 0..omniwarp::limits::CAPTURE_SLOTS {
+        let (st, body) = put_capture(&s, "left", 0, Some(&format!("v{v}")), &one).await;
+        assert_eq!(st, StatusCode::OK, "view {v}: {body}");
+    }
+    let (st, body) = put_capture(&s, "left", 0, Some("more"), &one).await;
+    assert_eq!(st, StatusCode::BAD_REQUEST, "{body}");
+    assert_eq!(body["field"], "view");
+    // An existing sequence still takes its frames.
+    let (st, body) = put_capture(&s, "left", 1, Some("v0"), &one).await;
+    assert_eq!(st, StatusCode::OK, "{body}");
+}
+
 #[tokio::test]
 async fn a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_disk() {
     let dir = tempfile::tempdir().unwrap();
@@ -1250,6 +1330,7 @@ fn the_limits_are_documented_where_users_read_them() {
         l::PROPOSALS.to_string(),
         l::EXPORT_NODES.to_string(),
         l::FEATURE_VALUE.to_string(),
+        l::CAPTURE_SLOTS.to_string(),
         omniwarp::server::STREAMS.to_string(),
         omniwarp::server::FEEDS.to_string(),
         omniwarp::server::RESERVE.to_string(),

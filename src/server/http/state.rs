@@ -205,6 +205,31 @@ impl Captures {
             .flat_map(|(_, v)| v.iter().flatten())
             .map(|g| g.bytes())
             .sum();
+        let limit = crate::limits::CAPTURE_BYTES;
+        // Caps that agree: a sequence that could never be held whole is refused at its first
+        // frame, not at the one that tips it over.
+        let whole = len.saturating_mul(frame.bytes());
+        if whole > limit {
+            return Err(ApiError::Invalid {
+                field: "body".into(),
+                reason: format!(
+                    "a {len}-frame sequence of {}×{} captures needs {} MiB, above the {} MiB                      the daemon holds; capture at a lower resolution or bit depth",
+                    frame.width,
+                    frame.height,
+                    whole >> 20,
+                    limit >> 20
+                ),
+            });
+        }
+        let slots = crate::limits::CAPTURE_SLOTS;
+        if !map.contains_key(id) && map.len() >= slots {
+            return Err(ApiError::Invalid {
+                field: "view".into(),
+                reason: format!(
+                    "the daemon holds captures of at most {slots} sequences (channel, view,                      period and code) at once; decode or DELETE some first"
+                ),
+            });
+        }
         let frames = map.entry(id.to_string()).or_default();
         frames.resize(len, None);
         if let Some(first) = frames
@@ -229,7 +254,6 @@ impl Captures {
             .flat_map(|(_, f)| f.iter())
             .map(|g| g.bytes())
             .sum();
-        let limit = crate::limits::CAPTURE_BYTES;
         if held + mine + frame.bytes() > limit {
             return Err(ApiError::Invalid {
                 field: "body".into(),
@@ -272,6 +296,23 @@ impl Captures {
     pub fn clear(&self, id: &str) -> usize {
         let mut map = self.0.lock().expect("captures lock");
         map.remove(id).map_or(0, |v| v.iter().flatten().count())
+    }
+
+    /// Drops the captures of every channel not in `channels`: once a rig has lost a channel
+    /// its captures can be neither decoded nor deleted, and would hold the cap for ever.
+    pub fn keep_channels(&self, channels: &[&str]) {
+        let mut map = self.0.lock().expect("captures lock");
+        // A key is the channel id, then the sequence, after a unit separator.
+        map.retain(|key, _| {
+            let id = key.split('\u{1f}').next().unwrap_or(key);
+            channels.contains(&id)
+        });
+    }
+
+    /// Bytes held over all channels.
+    pub fn held(&self) -> usize {
+        let map = self.0.lock().expect("captures lock");
+        map.values().flatten().flatten().map(|g| g.bytes()).sum()
     }
 }
 

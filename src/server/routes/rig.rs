@@ -76,6 +76,8 @@ pub async fn commit_rig(
     tokio::task::spawn_blocking(move || {
         let _writer = writer;
         state.store.save_rig(&rig.doc, revision, &meta)?;
+        let ids: Vec<&str> = rig.doc.channels.iter().map(|c| c.id.as_str()).collect();
+        state.captures.keep_channels(&ids);
         state.store.install(rig, revision);
         // Cached warps are keyed by content; those of the old rig can only take memory now.
         state.warps.lock().expect("cache lock").clear();
