@@ -614,17 +614,7 @@ fn raw(addr: SocketAddr, request: &str) -> TcpStream {
 
 /// The status code of the answer waiting on `c` (reads its first line only).
 fn status_of(c: &mut TcpStream) -> u16 {
-    c.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    let mut line = Vec::new();
-    let mut b = [0u8];
-    while c.read(&mut b).unwrap() == 1 && b[0] != b'\n' {
-        line.push(b[0]);
-    }
-    String::from_utf8_lossy(&line)
-        .split(' ')
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0)
+    crate::pressure::status_within(c, Duration::from_secs(60))
 }
 
 #[test]

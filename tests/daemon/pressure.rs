@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 /// The status of the answer on `c`, or 0 when none came within `within` (or the server
 /// closed the connection unanswered).
-fn status_within(c: &mut TcpStream, within: Duration) -> u16 {
+pub(crate) fn status_within(c: &mut TcpStream, within: Duration) -> u16 {
     c.set_read_timeout(Some(within)).unwrap();
     let mut line = Vec::new();
     let mut b = [0u8];

@@ -14,7 +14,9 @@
 //! damaged, the daemon refuses to start unless told to `reset` — a damaged data directory is
 //! never silently replaced, not even by the demo rig. A data directory of the file store
 //! (0.1.0: `rig.json`, `channels/<id>.json`, `proposals/<n>.json`, each with a `.prev`) is
-//! migrated on first start; its files are moved to `migrated-0.1/`.
+//! migrated on first start ([`migrate`]); its files are moved to `migrated-0.1/`.
+
+mod migrate;
 
 use super::canvas::Canvas;
 use super::db::{self, Db, Meta};
@@ -33,14 +35,6 @@ use std::sync::{Arc, Mutex, RwLock};
 pub struct Versioned<T> {
     pub revision: u64,
     pub value: T,
-}
-
-/// The persisted rig.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SavedRig {
-    revision: u64,
-    rig: RigDoc,
 }
 
 /// A channel's editable state. A tile screen of `None` means the warp follows the geometry
@@ -151,7 +145,7 @@ pub fn tiles_resource(id: &str) -> String {
 const RECOVER_DEPTH: u64 = 16;
 
 /// The history entry of a write the daemon makes itself.
-fn by_daemon(action: &'static str) -> Meta {
+pub(super) fn by_daemon(action: &'static str) -> Meta {
     Meta {
         who: "omniwarp".into(),
         action,
@@ -162,11 +156,11 @@ fn by_daemon(action: &'static str) -> Meta {
 }
 
 /// A kept document as `T`; a mismatch is reported like a damaged file.
-fn from_json<T: DeserializeOwned>(v: serde_json::Value) -> crate::Result<T> {
+pub(super) fn from_json<T: DeserializeOwned>(v: serde_json::Value) -> crate::Result<T> {
     serde_json::from_value(v).map_err(|e| crate::Error::invalid("data", e.to_string()))
 }
 
-fn json_of(v: &impl Serialize) -> serde_json::Value {
+pub(super) fn json_of(v: &impl Serialize) -> serde_json::Value {
     serde_json::to_value(v).expect("state documents serialise")
 }
 
@@ -178,48 +172,6 @@ pub enum Loaded<T> {
     /// Both exist but fail; the reasons, for the refusal to start.
     Damaged(Vec<String>),
 }
-
-/// Reads `dir/name`, or `name.prev` when the first is missing or fails `parse` (which
-/// validates as a request would); each failure is logged with its reason.
-pub fn load<T>(dir: &Path, name: &str, parse: impl Fn(&Path) -> crate::Result<T>) -> Loaded<T> {
-    let mut reasons = Vec::new();
-    for file in [name.to_string(), format!("{name}.prev")] {
-        let path = dir.join(&file);
-        if !path.exists() {
-            continue;
-        }
-        match parse(&path) {
-            Ok(v) => return Loaded::Found(v),
-            Err(e) => {
-                tracing::error!(file = %path.display(), error = %e,
-                    "refused on loading; trying the previous good one");
-                reasons.push(format!("{}: {e}", path.display()));
-            }
-        }
-    }
-    if reasons.is_empty() {
-        Loaded::Missing
-    } else {
-        Loaded::Damaged(reasons)
-    }
-}
-
-/// Reads a JSON file of at most `MAX_FILE` bytes.
-fn parse_json<T: DeserializeOwned>(path: &Path) -> crate::Result<T> {
-    use std::io::Read;
-    let file = std::fs::File::open(path).map_err(|e| crate::Error::file(path, e))?;
-    let mut text = Vec::new();
-    file.take(MAX_FILE + 1)
-        .read_to_end(&mut text)
-        .map_err(|e| crate::Error::file(path, e))?;
-    if text.len() as u64 > MAX_FILE {
-        return Err(crate::Error::file(path, format!("above {MAX_FILE} bytes")));
-    }
-    serde_json::from_slice(&text).map_err(|e| crate::Error::file(path, e))
-}
-
-/// Largest state file read back, bytes: a request body can be no larger than this either.
-const MAX_FILE: u64 = 16 << 20;
 
 /// A mesh screen's name as the daemon accepts it: a plain file name of a safe alphabet ending in
 /// `.obj`, so no path outside the mesh directories can be named.
@@ -279,7 +231,7 @@ impl Store {
                     }
                     Err(e) => return Err(damaged(db::FILE, &[e.to_string()])),
                 };
-                migrate_files(d, &db, &meshes, &o)?;
+                migrate::migrate_files(d, &db, &meshes, &o)?;
                 db
             }
             None => Db::open(None)?,
@@ -514,84 +466,9 @@ fn restart(db: &Db, resource: &str, value: &impl Serialize) -> crate::Result<u64
     Ok(next)
 }
 
-/// Moves a data directory of the file store (0.1.0) into the database, once: its rig, channel
-/// files and proposals (each read with its `.prev` fallback and validated as before) become
-/// revisions of the same numbers, and the files move to `migrated-0.1/` afterwards (a start
-/// killed in between finds the database done and moves them then).
-fn migrate_files(dir: &Path, db: &Db, meshes: &MeshDirs, o: &OpenOptions) -> crate::Result<()> {
-    let done = db.meta("migrated-0.1")?.is_some();
-    if !done && dir.join("rig.json").exists() && db.current("rig")?.is_none() {
-        let loaded = load(dir, "rig.json", |p| load_rig(p, meshes, o.memory_budget));
-        let (rig, revision) = match loaded {
-            Loaded::Found(found) => found,
-            Loaded::Damaged(reasons) if !o.reset => return Err(damaged("rig.json", &reasons)),
-            _ => {
-                set_aside(Some(dir), "rig.json");
-                return Ok(());
-            }
-        };
-        let migrate = by_daemon("migrate");
-        db.write("rig", None, (revision, &json_of(&rig.doc)), &migrate)?;
-        for ch in &rig.channels {
-            let data = match load(dir, &channel_file(&ch.id), parse_channel) {
-                Loaded::Found(data) => data,
-                Loaded::Missing => continue,
-                Loaded::Damaged(reasons) if !o.reset => {
-                    return Err(damaged(&channel_file(&ch.id), &reasons));
-                }
-                Loaded::Damaged(_) => {
-                    set_aside(Some(dir), &channel_file(&ch.id));
-                    continue;
-                }
-            };
-            let (c, t) = (&data.content, &data.tiles);
-            let content = (c.revision, &json_of(&c.value));
-            db.write(&content_resource(&ch.id), None, content, &migrate)?;
-            let tiles = (t.revision, &json_of(&t.value));
-            db.write(&tiles_resource(&ch.id), None, tiles, &migrate)?;
-        }
-        for (id, p) in file_proposals(dir) {
-            db.put_proposal(id, &p)?;
-        }
-        db.set_meta("migrated-0.1", "done")?;
-        tracing::info!(dir = %dir.display(), "file store migrated into the database");
-    }
-    if db.meta("migrated-0.1")?.is_some() {
-        let to = dir.join("migrated-0.1");
-        for name in ["rig.json", "rig.json.prev", "channels", "proposals"] {
-            let from = dir.join(name);
-            if from.exists() {
-                create_private_dir_durably(&to)?;
-                std::fs::rename(&from, to.join(name)).map_err(|e| crate::Error::file(&from, e))?;
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The proposals of a file store's `proposals/` directory, as JSON.
-fn file_proposals(dir: &Path) -> Vec<(u64, serde_json::Value)> {
-    let Ok(entries) = std::fs::read_dir(dir.join("proposals")) else {
-        return Vec::new();
-    };
-    entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "json"))
-        .filter_map(|p| match parse_json::<Proposal>(&p) {
-            Ok(v) => Some((v.id, json_of(&v))),
-            Err(e) => {
-                tracing::error!(file = %p.display(), error = %e,
-                    "proposal left out of the migration");
-                None
-            }
-        })
-        .collect()
-}
-
 /// Keeps a damaged file and its `.prev` as `<name>.damaged` and `<name>.prev.damaged`, for
 /// whoever wants to look at them after a `--reset`.
-fn set_aside(dir: Option<&Path>, name: &str) {
+pub(super) fn set_aside(dir: Option<&Path>, name: &str) {
     let Some(d) = dir else { return };
     for f in [name.to_string(), format!("{name}.prev")] {
         let from = d.join(&f);
@@ -607,7 +484,7 @@ fn set_aside(dir: Option<&Path>, name: &str) {
     }
 }
 
-fn damaged(name: &str, reasons: &[String]) -> crate::Error {
+pub(super) fn damaged(name: &str, reasons: &[String]) -> crate::Error {
     crate::Error::invalid(
         "data",
         format!(
@@ -616,20 +493,6 @@ fn damaged(name: &str, reasons: &[String]) -> crate::Error {
             reasons.join("; ")
         ),
     )
-}
-
-/// A channel's saved state, validated as a PUT of its content and tiles would be.
-fn parse_channel(path: &Path) -> crate::Result<ChannelData> {
-    let data: ChannelData = parse_json(path)?;
-    data.content
-        .value
-        .view()
-        .map_err(|e| crate::Error::file(path, format!("content: {e}")))?;
-    if let Some(t) = &data.tiles.value {
-        t.validate()
-            .map_err(|e| crate::Error::file(path, format!("tiles: {e}")))?;
-    }
-    Ok(data)
 }
 
 /// The proposals kept in the database, each one checked by putting its channel into `rig`
@@ -698,14 +561,4 @@ impl MeshDirs {
         rig.check_budget(budget)?;
         Ok(rig)
     }
-}
-
-fn load_rig(path: &Path, meshes: &MeshDirs, budget: u64) -> crate::Result<(Rig, u64)> {
-    let saved: SavedRig = parse_json(path)?;
-    Ok((meshes.accept(saved.rig, budget)?, saved.revision))
-}
-
-/// Channel ids are restricted to a file-safe alphabet by rig validation.
-fn channel_file(id: &str) -> String {
-    format!("channels/{id}.json")
 }
