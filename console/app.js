@@ -71,12 +71,27 @@ class App {
     return c ? c.resolution : null;
   }
 
+  // Over TLS the daemon's certificate fingerprint, to compare with what it printed at start
+  // before the token is typed in. The version answers without the token.
+  async showFingerprint() {
+    try {
+      const v = await (await fetch('/v1/version')).json();
+      if (v.tls_sha256) {
+        $('#tls-sha256').textContent = v.tls_sha256;
+        $('#tls-fingerprint').hidden = false;
+      }
+    } catch {
+      // Plain HTTP or the daemon is away: nothing to show.
+    }
+  }
+
   async start() {
     if (this.stopFeed) this.stopFeed();
     try {
       await this.loadRig();
     } catch (e) {
       if (e instanceof ApiError && e.status === 401) {
+        this.showFingerprint();
         $('#token-dialog').hidden = false;
         this.notify('this daemon needs its access token', 'warn');
         return;

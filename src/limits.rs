@@ -29,6 +29,10 @@ pub const TILE_TRIANGLES: usize = 32_768;
 pub const EDITS_PER_PATCH: usize = 1000;
 /// Iterations of one `smooth` edit.
 pub const SMOOTH_ITERATIONS: usize = 1000;
+/// The work one PATCH of a tile screen may do, in feature visits (about a microsecond each on
+/// one core, see `Edit::work`): about two seconds. The first edit always runs, since the grid
+/// limits bound it alone.
+pub const EDIT_WORK: u64 = 2_000_000;
 /// Point correspondences in one calibration.
 pub const CALIBRATION_POINTS: usize = 20_000;
 /// How far from the origin a world point may be, metres (rigs and calibration points).
@@ -54,6 +58,13 @@ pub const FEATURE_VALUE: f64 = 1e3;
 pub const MESH_BYTES: u64 = 64 << 20;
 /// Triangles of a mesh screen (an OBJ file or upload).
 pub const MESH_TRIANGLES: usize = 4_000_000;
+/// Meshes the data directory keeps (uploads beyond are a 507 until one is deleted).
+pub const MESHES: usize = 256;
+/// Bytes all uploaded meshes together may take on disk.
+pub const MESH_STORE_BYTES: u64 = 1 << 30;
+/// Memory a mesh screen takes per triangle while it is read and indexed, counted in the memory
+/// budget with the warps (measured: a 4,000,000-triangle fan, a 7.6 MiB OBJ, peaked at 1.13 GB).
+pub const MESH_BYTES_PER_TRIANGLE: u64 = 288;
 /// Largest camera capture upload (one frame, PNG or JPEG), bytes.
 pub const CAPTURE_BODY: u64 = 64 << 20;
 /// Camera captures the daemon holds at once over all channels, bytes (one byte per pixel).

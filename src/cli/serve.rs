@@ -24,6 +24,22 @@ pub struct ServeArgs {
     /// File holding the bearer token every request must carry (Authorization: Bearer …).
     #[arg(long)]
     token_file: Option<PathBuf>,
+    /// Serve HTTPS on loopback too. Beyond loopback HTTPS is the default: with --tls-cert and
+    /// --tls-key, or a self-signed certificate made on first start and kept in the data
+    /// directory's tls/, its SHA-256 fingerprint printed at start for clients to pin.
+    #[arg(long)]
+    tls: bool,
+    /// The certificate chain (PEM) to serve HTTPS with, the daemon's own certificate first.
+    #[arg(long, requires = "tls_key", value_name = "FILE")]
+    tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of --tls-cert.
+    #[arg(long, requires = "tls_cert", value_name = "FILE")]
+    tls_key: Option<PathBuf>,
+    /// Serve plain HTTP beyond loopback: the token and every edit cross the network in clear,
+    /// so anyone on it who reads one request can drive the projectors. Only on a network that is
+    /// itself trusted or encrypted.
+    #[arg(long, conflicts_with_all = ["tls", "tls_cert"])]
+    plain_http: bool,
     /// Bytes the warps of all channels may hold at once; a rig needing more is refused
     /// (e.g. 2GiB, 512MiB, or a number of bytes).
     #[arg(long, default_value = "2GiB", value_parser = parse_bytes)]
@@ -41,6 +57,16 @@ pub struct ServeArgs {
     #[arg(long, default_value_t = omniwarp::server::CONNECTIONS as u16,
           value_parser = clap::value_parser!(u16).range(16..))]
     max_connections: u16,
+    /// Revisions of each document (the rig, each channel's content and tiles) the history keeps;
+    /// older rows are dropped, the oldest kept becoming a full snapshot.
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(1..))]
+    history_revisions: u64,
+    /// Days the history keeps a row (the current revision of each document always stays).
+    #[arg(long, default_value_t = 365, value_parser = clap::value_parser!(u64).range(1..=36_500))]
+    history_days: u64,
+    /// Bytes of history kept per document, patches and snapshots (e.g. 256MiB).
+    #[arg(long, default_value = "256MiB", value_parser = parse_bytes)]
+    history_size: u64,
     /// A directory mesh screens may be read from, besides the data directory's meshes/.
     #[arg(long)]
     assets: Option<PathBuf>,
@@ -89,6 +115,29 @@ fn warn_if_readable_by_others(path: &std::path::Path, what: &str, fix: &str) {
     }
 }
 
+/// The TLS identity: the given certificate and key, or the self-made one of the data
+/// directory, for the names clients may reach the daemon by.
+fn tls_identity(a: &ServeArgs) -> Result<omniwarp::server::tls::Tls> {
+    use omniwarp::server::tls::Tls;
+    if let (Some(cert), Some(key)) = (&a.tls_cert, &a.tls_key) {
+        return Tls::from_pem(cert, key).map_err(|e| anyhow::anyhow!("--tls-cert/--tls-key: {e}"));
+    }
+    let mut names: Vec<String> = ["localhost", "127.0.0.1", "::1"].map(String::from).into();
+    if !a.bind.ip().is_unspecified() {
+        names.push(a.bind.ip().to_string());
+    }
+    if let Ok(host) = std::fs::read_to_string("/proc/sys/kernel/hostname") {
+        names.push(host.trim().to_string());
+    }
+    names.extend(a.allow_hosts.iter().cloned());
+    names.retain(|n| !n.is_empty());
+    names.dedup();
+    if a.data.is_none() {
+        tracing::warn!("no --data: the self-signed certificate lasts this run only");
+    }
+    Tls::self_signed(a.data.as_deref(), &names).map_err(|e| anyhow::anyhow!("--tls: {e}"))
+}
+
 pub fn run(a: ServeArgs) -> Result<()> {
     // Logs on stderr; stdout carries only the "listening on" line scripts read.
     // Colour codes only for a person at a terminal, not in a log file.
@@ -135,10 +184,21 @@ pub fn run(a: ServeArgs) -> Result<()> {
             initial,
             reset: a.reset,
             memory_budget: a.memory_budget,
-            assets: a.assets,
+            assets: a.assets.clone(),
+            retention: omniwarp::server::Retention {
+                revisions: a.history_revisions,
+                max_age: std::time::Duration::from_secs(a.history_days * 86_400),
+                bytes: a.history_size,
+            },
         },
     )
     .map_err(|e| anyhow::anyhow!("--data: {e}"))?;
+    // After the store, which makes the data directory the certificate is kept in.
+    let tls = if a.tls || a.tls_cert.is_some() || (!a.bind.ip().is_loopback() && !a.plain_http) {
+        Some(tls_identity(&a)?)
+    } else {
+        None
+    };
     let state = AppState::with_options(
         store,
         Options {
@@ -153,6 +213,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
                 .and_then(|p| p.file_stem())
                 .map_or("local".into(), |n| n.to_string_lossy().into_owned()),
             connections: usize::from(a.max_connections),
+            tls: tls.clone(),
         },
     );
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -164,8 +225,16 @@ pub fn run(a: ServeArgs) -> Result<()> {
             .with_context(|| format!("--bind {}", a.bind))?;
         let addr = listener.local_addr()?;
         tracing::info!(%addr, "omniwarp serving /v1");
-        // On stdout too, so scripts and tests that bind port 0 learn the port.
-        outln!("listening on http://{addr}");
+        // On stdout too, so scripts and tests that bind port 0 learn the port (and, over TLS,
+        // the fingerprint to pin).
+        match &tls {
+            None => outln!("listening on http://{addr}"),
+            Some(t) => {
+                tracing::info!(fingerprint = t.fingerprint(), "TLS certificate (SHA-256)");
+                outln!("listening on https://{addr}");
+                outln!("certificate SHA-256 {}", t.fingerprint());
+            }
+        }
         std::io::Write::flush(&mut std::io::stdout())?;
         launch(listener, state, shutdown_signal()).await?;
         tracing::info!("stopped");

@@ -46,6 +46,15 @@ pub struct RigDoc {
 }
 
 impl RigDoc {
+    /// The memory the channels' warps take, at [`crate::limits::WARP_BYTES_PER_PIXEL`].
+    pub fn warp_bytes(&self) -> u64 {
+        self.channels
+            .iter()
+            .map(|c| u64::from(c.resolution[0]) * u64::from(c.resolution[1]))
+            .sum::<u64>()
+            * crate::limits::WARP_BYTES_PER_PIXEL
+    }
+
     /// The document alone, unvalidated and with any mesh not loaded; errors name the field by
     /// JSON pointer, and text after the document is refused.
     pub fn parse(text: &str) -> Result<RigDoc> {
@@ -349,16 +358,27 @@ impl Rig {
     /// What the warps of all channels hold in memory at once, bytes (see
     /// [`crate::limits::WARP_BYTES_PER_PIXEL`]).
     pub fn warp_bytes(&self) -> u64 {
-        self.channels
-            .iter()
-            .map(|c| u64::from(c.width) * u64::from(c.height))
-            .sum::<u64>()
-            * crate::limits::WARP_BYTES_PER_PIXEL
+        self.doc.warp_bytes()
     }
 
-    /// Refuses a rig whose warps would not fit in `budget` bytes, naming the largest channel.
+    /// What the rig is counted as in a memory budget: its warps and its mesh screen, if any.
+    pub fn memory_bytes(&self) -> u64 {
+        self.warp_bytes() + self.mesh_bytes()
+    }
+
+    fn mesh_bytes(&self) -> u64 {
+        match &self.doc.screen {
+            crate::surface::Screen::Mesh {
+                loaded: Some(mesh), ..
+            } => mesh.memory_bytes(),
+            _ => 0,
+        }
+    }
+
+    /// Refuses a rig whose warps and mesh would not fit in `budget` bytes, naming the largest
+    /// channel (or the mesh, when it is the larger part).
     pub fn check_budget(&self, budget: u64) -> Result<()> {
-        let need = self.warp_bytes();
+        let need = self.memory_bytes();
         if need <= budget {
             return Ok(());
         }
@@ -368,12 +388,23 @@ impl Rig {
             .enumerate()
             .max_by_key(|(_, c)| u64::from(c.width) * u64::from(c.height))
             .expect("a rig has channels");
+        let (mesh, warps) = (self.mesh_bytes(), self.warp_bytes());
+        let field = if mesh > warps {
+            "/screen/obj".to_string()
+        } else {
+            format!("/channels/{n}/resolution")
+        };
+        let with_mesh = if mesh > 0 {
+            format!(" with the mesh screen's {} MiB", mesh >> 20)
+        } else {
+            String::new()
+        };
         Err(Error::invalid(
-            format!("/channels/{n}/resolution"),
+            field,
             format!(
-                "the warps of all channels need {} MiB ({}×{} is the largest), above the memory \
-                 budget of {} MiB",
-                need >> 20,
+                "the warps of all channels need {} MiB ({}×{} is the largest){with_mesh}, above \
+                 the memory budget of {} MiB",
+                warps >> 20,
                 c.width,
                 c.height,
                 budget >> 20

@@ -1,9 +1,11 @@
 //! A small blocking HTTP/1.1 client with keep-alive, enough to drive the daemon from tests,
 //! benchmarks and scripts without pulling in a client stack: requests with a body and headers,
-//! responses with `Content-Length` (all the daemon's non-streaming responses have one).
+//! responses with `Content-Length` (all the daemon's non-streaming responses have one). Over
+//! TLS it trusts the one certificate whose fingerprint it is given ([`Client::pinned`]).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
+use std::sync::Arc;
 use std::time::Duration;
 
 /// A connection to a daemon at one address, kept alive between requests, sending the bearer
@@ -11,8 +13,13 @@ use std::time::Duration;
 pub struct Client {
     addr: SocketAddr,
     token: Option<String>,
-    conn: Option<BufReader<TcpStream>>,
+    tls: Option<Arc<rustls::ClientConfig>>,
+    conn: Option<BufReader<Box<dyn Stream>>>,
 }
+
+/// A connection, plain or TLS.
+trait Stream: Read + Write + Send {}
+impl<T: Read + Write + Send> Stream for T {}
 
 /// A response, read whole.
 #[derive(Debug, Clone)]
@@ -53,7 +60,29 @@ impl Client {
         Client {
             addr,
             token,
+            tls: None,
             conn: None,
+        }
+    }
+
+    /// A client of a daemon serving TLS at `addr` that accepts only the certificate whose
+    /// SHA-256 fingerprint is `pin` (see [`super::tls::parse_fingerprint`]); any other
+    /// certificate, or a daemon speaking plain HTTP, fails the request before the token is sent.
+    pub fn pinned(addr: SocketAddr, token: Option<String>, pin: [u8; 32]) -> Self {
+        let provider = super::tls::provider();
+        let verifier = Arc::new(super::tls::Pinned {
+            pin,
+            provider: provider.clone(),
+        });
+        let config = rustls::ClientConfig::builder_with_provider(provider)
+            .with_safe_default_protocol_versions()
+            .expect("the ring provider supports the default versions")
+            .dangerous()
+            .with_custom_certificate_verifier(verifier)
+            .with_no_client_auth();
+        Client {
+            tls: Some(Arc::new(config)),
+            ..Client::new(addr, token)
         }
     }
 
@@ -86,7 +115,22 @@ impl Client {
             let s = TcpStream::connect_timeout(&self.addr, Duration::from_secs(5))?;
             s.set_read_timeout(Some(Duration::from_secs(120)))?;
             s.set_nodelay(true)?;
-            self.conn = Some(BufReader::new(s));
+            let stream: Box<dyn Stream> = match &self.tls {
+                None => Box::new(s),
+                Some(config) => {
+                    // The pin names the certificate, so the name asked for matters not.
+                    let name = rustls::pki_types::ServerName::IpAddress(self.addr.ip().into());
+                    let conn = rustls::ClientConnection::new(config.clone(), name)
+                        .map_err(std::io::Error::other)?;
+                    let mut tls = rustls::StreamOwned::new(conn, s);
+                    // The handshake now, so a wrong certificate fails before anything is sent.
+                    while tls.conn.is_handshaking() {
+                        tls.conn.complete_io(&mut tls.sock)?;
+                    }
+                    Box::new(tls)
+                }
+            };
+            self.conn = Some(BufReader::new(stream));
         }
         let conn = self.conn.as_mut().expect("connected above");
         let mut req = format!(
@@ -112,6 +156,7 @@ impl Client {
         let stream = conn.get_mut();
         stream.write_all(req.as_bytes())?;
         stream.write_all(body)?;
+        stream.flush()?;
         let bad = |why: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string());
         let mut line = String::new();
         if conn.read_line(&mut line)? == 0 {

@@ -9,6 +9,7 @@ mod http;
 mod previews;
 mod routes;
 pub mod storage;
+pub mod tls;
 
 use http::guard;
 use routes::{
@@ -19,6 +20,7 @@ pub use http::error::ApiError;
 pub use http::guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
 pub use http::state::{AppState, FEEDS, MAX_BODY, Options, STREAMS, WORKERS};
 pub use storage::canvas::Canvas;
+pub use storage::db::Retention;
 pub use storage::store::{ChannelData, OpenOptions, Store};
 
 use axum::Router;
@@ -87,7 +89,7 @@ routes! {
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
     "/v1/meshes" => get(meshes::list);
-    "/v1/meshes/{name}" => put(meshes::put);
+    "/v1/meshes/{name}" => put(meshes::put).delete(meshes::delete);
     "/v1/events" => get(rig::events);
 }
 
@@ -155,6 +157,10 @@ fn reserve_router(state: Arc<AppState>) -> Router {
         .with_state(state)
 }
 
+/// What a connection is read from and written to: TCP, or TLS over it.
+trait Io: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + Unpin {}
+impl<T: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + Unpin> Io for T {}
+
 /// Serves until `shutdown` completes, then stops accepting, ends the change feeds and lets
 /// requests in flight finish for up to [`DRAIN`].
 ///
@@ -182,8 +188,10 @@ pub async fn launch(
     reserve_http
         .header_read_timeout(RESERVE_HEADER_TIMEOUT)
         .keep_alive(false);
+    let acceptor = state.options.tls.as_ref().map(tls::Tls::acceptor);
     tokio::pin!(shutdown);
     loop {
+        let acceptor = acceptor.clone();
         let stream = tokio::select! {
             accepted = listener.accept() => match accepted {
                 Ok((stream, _)) => stream,
@@ -209,11 +217,21 @@ pub async fn launch(
         let _ = stream.set_nodelay(true);
         let mut io = tokio_io_timeout::TimeoutStream::new(stream);
         io.set_write_timeout(Some(WRITE_TIMEOUT));
+        let io = Box::pin(io);
         let service = hyper_util::service::TowerToHyperService::new(app.clone());
-        let conn = http.serve_connection(TokioIo::new(Box::pin(io)), service);
-        let conn = graceful.watch(conn);
+        let (http, watcher) = (http.clone(), graceful.watcher());
         tokio::spawn(async move {
-            let _ = conn.await;
+            // The handshake runs in the connection's own task, under the header deadline, so a
+            // client that stalls in it holds one permit and nothing else.
+            let io: Box<dyn Io> = match &acceptor {
+                None => Box::new(io),
+                Some(a) => match tokio::time::timeout(HEADER_TIMEOUT, a.accept(io)).await {
+                    Ok(Ok(tls)) => Box::new(tls),
+                    _ => return,
+                },
+            };
+            let conn = http.serve_connection(TokioIo::new(io), service);
+            let _ = watcher.watch(conn).await;
             drop(permit);
         });
     }

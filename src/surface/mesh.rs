@@ -13,6 +13,7 @@ pub struct Mesh {
     /// Each triangle's index in the order it was given (the tree reorders them).
     ids: Vec<u32>,
     nodes: Vec<Node>,
+    digest: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,10 +39,19 @@ impl Mesh {
         if tris.iter().flatten().any(|v| !v.is_finite()) {
             return Err(Error::invalid("mesh", "has a non-finite vertex"));
         }
+        let digest = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            for v in tris.iter().flatten() {
+                v.to_array().map(f64::to_bits).hash(&mut h);
+            }
+            h.finish()
+        };
         let mut m = Mesh {
             ids: (0..tris.len() as u32).collect(),
             tris,
             nodes: Vec::new(),
+            digest,
         };
         let n = m.tris.len();
         m.build(0, n);
@@ -50,7 +60,41 @@ impl Mesh {
 
     /// An OBJ file as a mesh (see [`read_obj_triangles`]).
     pub fn read_obj(path: &Path) -> Result<Self> {
-        Mesh::new(read_obj_triangles(path)?).map_err(|e| Error::file(path, e))
+        Mesh::read_obj_within(path, u64::MAX)
+    }
+
+    /// [`Mesh::read_obj`], refused before the triangles are built when reading and indexing
+    /// them would take more than `budget` bytes (see
+    /// [`crate::limits::MESH_BYTES_PER_TRIANGLE`]): a small OBJ of many faces sharing a few
+    /// vertices takes far more memory than its file.
+    pub fn read_obj_within(path: &Path, budget: u64) -> Result<Self> {
+        let text = read_obj_text(path)?;
+        let need = memory_of(count_obj_triangles(&text));
+        if need > budget {
+            return Err(Error::file(
+                path,
+                format!(
+                    "its {} triangles need {} MiB to read and index, above the {} MiB the memory \
+                     budget leaves after the channels' warps",
+                    count_obj_triangles(&text),
+                    need >> 20,
+                    budget >> 20
+                ),
+            ));
+        }
+        let tris = parse_obj_triangles(&text).map_err(|e| Error::file(path, e.reason()))?;
+        Mesh::new(tris).map_err(|e| Error::file(path, e))
+    }
+
+    /// A hash of the triangles as given: two meshes of one name but different shapes differ
+    /// in it, so what is computed from a mesh can be keyed by it.
+    pub fn digest(&self) -> u64 {
+        self.digest
+    }
+
+    /// The memory this mesh is counted as in a memory budget.
+    pub fn memory_bytes(&self) -> u64 {
+        memory_of(self.tris.len())
     }
 
     /// The triangles in the tree's order.
@@ -204,6 +248,15 @@ fn moller_trumbore(o: DVec3, d: DVec3, t: &[DVec3; 3]) -> Option<f64> {
 /// Only a regular file of at most [`crate::limits::MESH_BYTES`] is read: a device or a FIFO
 /// named as a mesh would never end.
 pub fn read_obj_triangles(path: &Path) -> Result<Vec<[DVec3; 3]>> {
+    parse_obj_triangles(&read_obj_text(path)?).map_err(|e| Error::file(path, e.reason()))
+}
+
+fn memory_of(triangles: usize) -> u64 {
+    (triangles as u64).saturating_mul(crate::limits::MESH_BYTES_PER_TRIANGLE)
+}
+
+/// An OBJ file's text: only from a regular file of at most [`crate::limits::MESH_BYTES`].
+fn read_obj_text(path: &Path) -> Result<String> {
     use std::io::Read;
     let file = std::fs::File::open(path).map_err(|e| Error::file(path, e))?;
     let meta = file.metadata().map_err(|e| Error::file(path, e))?;
@@ -227,15 +280,26 @@ pub fn read_obj_triangles(path: &Path) -> Result<Vec<[DVec3; 3]>> {
             format!("above the mesh limit of {limit} bytes"),
         ));
     }
-    let text = String::from_utf8(bytes).map_err(|_| Error::file(path, "not UTF-8 text"))?;
-    parse_obj_triangles(&text).map_err(|e| Error::file(path, e.reason()))
+    String::from_utf8(bytes).map_err(|_| Error::file(path, "not UTF-8 text"))
+}
+
+/// How many triangles the faces of OBJ text fan into (a face of n vertices makes n − 2),
+/// counted without building anything; malformed lines are left to the parser.
+pub fn count_obj_triangles(text: &str) -> usize {
+    text.lines()
+        .filter_map(|line| {
+            let mut parts = line.split_whitespace();
+            (parts.next() == Some("f")).then(|| parts.count().saturating_sub(2))
+        })
+        .sum()
 }
 
 /// The triangles of OBJ text (see [`read_obj_triangles`]); at most
 /// [`crate::limits::MESH_TRIANGLES`].
 pub fn parse_obj_triangles(text: &str) -> Result<Vec<[DVec3; 3]>> {
     let mut verts = Vec::new();
-    let mut tris = Vec::new();
+    // Grown by doubling, the list would take up to twice its size.
+    let mut tris = Vec::with_capacity(count_obj_triangles(text).min(crate::limits::MESH_TRIANGLES));
     for (no, line) in text.lines().enumerate() {
         let mut parts = line.split_whitespace();
         let bad = |why: &str| Error::invalid("obj", format!("line {}: {why}", no + 1));

@@ -199,6 +199,13 @@ impl Screen {
     pub fn check_inside(&self, eye: DVec3, point: DVec3, field: &str) -> Result<()> {
         let point = finite3(field, point)?;
         let m = |v: f64| format!("{v:.3} m");
+        let far = crate::limits::WORLD_EXTENT;
+        if point.abs().max_element() > far {
+            return Err(Error::invalid(
+                field,
+                format!("is more than the limit of {far} m from the origin"),
+            ));
+        }
         // The signed distance inside (positive) or beyond (negative) the surface, and what
         // "beyond" means for this shape.
         let (inside, beyond) = match self {
@@ -244,8 +251,46 @@ impl Screen {
                 )
             }
             Screen::Plane(p) => {
-                let n = DVec3::from_array(p.normal).normalize();
-                let s = (point - DVec3::from_array(p.centre)).dot(n);
+                let (n, up, right) = p.frame();
+                let (o, e) = (
+                    point - DVec3::from_array(p.centre),
+                    eye - DVec3::from_array(p.centre),
+                );
+                // The room before a flat wall is as wide and high as the wall (extended to
+                // the eye) and, in depth, ten times its larger side or the eye's distance:
+                // from further away every pixel would show one direction of the content.
+                let room = |axis: DVec3, half: f64, name: &str| {
+                    let (c, eye_c) = (o.dot(axis), e.dot(axis));
+                    let (lo, hi) = ((-half).min(eye_c), half.max(eye_c));
+                    if (lo..=hi).contains(&c) {
+                        Ok(())
+                    } else {
+                        Err(Error::invalid(
+                            field,
+                            format!(
+                                "lies {} {name} of the plane's centre, beyond the wall's extent \
+                                 from {} to {} (extended to the eye)",
+                                m(c),
+                                m(lo),
+                                m(hi)
+                            ),
+                        ))
+                    }
+                };
+                room(right, p.width / 2.0, "right")?;
+                room(up, p.height / 2.0, "up")?;
+                let (s, depth) = (o.dot(n), 10.0 * e.dot(n).max(p.width).max(p.height));
+                if s > depth {
+                    return Err(Error::invalid(
+                        field,
+                        format!(
+                            "lies {} before the plane, beyond ten times the wall's size or the \
+                             eye's distance ({})",
+                            m(s),
+                            m(depth)
+                        ),
+                    ));
+                }
                 (s, format!("{} behind the plane", m(-s)))
             }
             Screen::Mesh { loaded, .. } => {
@@ -285,20 +330,26 @@ impl Screen {
 
     /// Loads a mesh screen's OBJ file, relative to `base`.
     pub fn load(&mut self, base: &std::path::Path, field: &str) -> Result<()> {
-        self.load_with(field, |obj| Ok(base.join(obj)))
+        self.load_with(field, |obj| Ok(base.join(obj)), u64::MAX)
     }
 
     /// Loads a mesh screen's OBJ file from the path `resolve` gives its name; `resolve` may
-    /// refuse a name (the daemon reads meshes from its own directories only).
+    /// refuse a name (the daemon reads meshes from its own directories only), and a mesh that
+    /// would take more than `budget` bytes is refused before it is built.
     pub fn load_with(
         &mut self,
         field: &str,
         resolve: impl FnOnce(&str) -> Result<std::path::PathBuf>,
+        budget: u64,
     ) -> Result<()> {
         if let Screen::Mesh { obj, loaded } = self {
             let at = format!("{field}/obj");
             let path = resolve(obj).map_err(|e| Error::invalid(&at, e.reason()))?;
-            let mesh = Mesh::read_obj(&path).map_err(|e| Error::invalid(&at, e.to_string()))?;
+            // Named as the document names it: where the file lies is the host's business.
+            let mesh = Mesh::read_obj_within(&path, budget).map_err(|e| match e {
+                Error::File { reason, .. } => Error::invalid(&at, format!("`{obj}`: {reason}")),
+                other => Error::invalid(&at, other.to_string()),
+            })?;
             *loaded = Some(std::sync::Arc::new(mesh));
         }
         Ok(())

@@ -208,6 +208,13 @@ fn bad_centres_are_named_errors() {
         (PLANE, [0.0, 0.0, -3.5], "behind the plane"),
         (PLANE, [1.0, 0.5, -2.9995], "on the wall"),
         (PLANE, [f64::NAN, 0.0, 0.0], "finite"),
+        // Finite but absurd: far up a cylinder, beside or before a plane, or beyond the world.
+        (CYLINDER, [0.0, 1e4, 0.0], "outside the cylinder's height"),
+        (PLANE, [0.0, 0.0, 1e3], "before the plane"),
+        (PLANE, [40.0, 0.0, -1.0], "beyond the wall's extent"),
+        (PLANE, [0.0, -1e4, -1.0], "beyond the wall's extent"),
+        (PLANE, [0.0, 1e300, 0.0], "limit of 100000 m"),
+        (DOME, [1e300, 0.0, 0.0], "limit of 100000 m"),
     ];
     for (screen, c, says) in cases {
         let rig = rig(screen, [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]);
@@ -231,6 +238,7 @@ fn bad_centres_are_named_errors() {
     let mesh = rig_at(screen, [0.0; 3], [0.0, 0.0, -1.0], dir.path());
     for (c, says) in [
         ([0.0, 0.0, -4.0], "behind the mesh"),
+        ([0.0, 0.0, 1e300], "limit of 100000 m"),
         ([0.5, 0.2, -2.9995], "on the wall"),
     ] {
         let e = mesh

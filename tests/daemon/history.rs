@@ -8,6 +8,7 @@ use crate::common;
 use axum::http::StatusCode;
 use common::server::{call, get, json, state, write};
 use omniwarp::server::client::Client;
+use omniwarp::server::{AppState, OpenOptions, Store};
 use std::collections::HashMap;
 use std::net::SocketAddr;
 
@@ -452,6 +453,221 @@ async fn disjoint_edits_merge_and_overlapping_ones_are_refused() {
         .await
         .0,
         StatusCode::PRECONDITION_FAILED
+    );
+}
+
+/// A merge is judged on what the edits change, not on what they name: re-sending a feature as
+/// one saw it would put back another client's acknowledged edit, and a smooth from a revision it
+/// left unchanged (a fixed point of smoothing) would smooth that edit away. Both are 412.
+#[tokio::test]
+async fn merges_are_judged_on_what_the_edits_change() {
+    let s = state(None, None);
+    let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
+    // A screen that is a fixed point of smoothing: angles linear in the grid (whole degrees, so
+    // every mean is exact), every feature valid and inside.
+    let mut screen = json(&b)["tiles"].clone();
+    let columns = screen["layout"]["columns"].as_u64().unwrap() as usize;
+    let rows = screen["layout"]["rows"].as_u64().unwrap() as usize;
+    for (i, f) in screen["layout"]["features"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .enumerate()
+    {
+        let (k, l) = ((i % columns) as f64, (i / columns) as f64);
+        f["phi"] = serde_json::json!(2.0 * k - columns as f64);
+        f["theta"] = serde_json::json!(rows as f64 - 2.0 * l);
+        f["scale"] = serde_json::json!(1.0);
+        f["valid"] = serde_json::json!(true);
+        f["outside"] = serde_json::json!(false);
+    }
+    let put = write(
+        "PUT",
+        "/v1/channels/left/tiles",
+        Some(1),
+        screen.to_string(),
+    );
+    let (st, _, body) = call(&s, put).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let (k, l) = (columns / 2, rows / 2);
+    let seen = rows as f64 - 2.0 * l as f64;
+    // Client 1 moves the middle feature up half a degree: revision 3.
+    let nudged = write(
+        "PATCH",
+        "/v1/channels/left/tiles",
+        Some(2),
+        nudge(k, l, seen + 0.5),
+    );
+    assert_eq!(call(&s, nudged).await.0, StatusCode::OK);
+    let theta =
+        |b: &[u8]| json(b)["tiles"]["layout"]["features"][l * columns + k]["theta"].as_f64();
+    let merge =
+        |edit: serde_json::Value| serde_json::json!({"merge": true, "edits": [edit]}).to_string();
+    // Client 2, still at revision 2, re-sends that feature as it saw it.
+    let resent = merge(serde_json::json!(
+        {"op": "set_feature", "column": k, "row": l, "theta": seen}));
+    let (st, h, _) = call(
+        &s,
+        write("PATCH", "/v1/channels/left/tiles", Some(2), resent),
+    )
+    .await;
+    assert_eq!(
+        (st, h["etag"].to_str().unwrap()),
+        (StatusCode::PRECONDITION_FAILED, "\"3\"")
+    );
+    // Client 2 smooths from revision 2, which smoothing leaves as it is.
+    let smooth = merge(serde_json::json!({"op": "smooth", "iterations": 3}));
+    let (st, _, _) = call(
+        &s,
+        write("PATCH", "/v1/channels/left/tiles", Some(2), smooth),
+    )
+    .await;
+    assert_eq!(st, StatusCode::PRECONDITION_FAILED);
+    let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(json(&b)["revision"], 3);
+    assert_eq!(theta(&b), Some(seen + 0.5), "client 1's edit stays");
+    // A feature elsewhere, as client 2 saw it changed, still merges.
+    let elsewhere = merge(serde_json::json!(
+        {"op": "set_feature", "column": 2, "row": 2, "theta": rows as f64 - 3.75}));
+    let (st, _, body) = call(
+        &s,
+        write("PATCH", "/v1/channels/left/tiles", Some(2), elsewhere),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(theta(&b), Some(seen + 0.5));
+}
+
+/// The history keeps what the retention allows: beyond the newest revisions (compacted every
+/// 64th write), beyond an age, beyond a size. Every revision still listed rebuilds (the oldest
+/// kept became a snapshot), also after a restart, and an undo into what was dropped says so.
+#[tokio::test]
+async fn the_history_keeps_what_the_retention_allows() {
+    use omniwarp::server::Retention;
+    use omniwarp::server::storage::db::{Db, Meta};
+    let dir = tempfile::tempdir().unwrap();
+    let keep = Retention {
+        revisions: 10,
+        ..Retention::default()
+    };
+    let open = |retention| {
+        Store::open_with(
+            Some(dir.path().to_path_buf()),
+            OpenOptions {
+                initial: Some(common::server::demo_rig()),
+                retention,
+                ..OpenOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let s = AppState::new(open(keep), None);
+    let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
+    let a = json(&b)["tiles"]["layout"]["features"][5 * 33 + 5]["theta"]
+        .as_f64()
+        .unwrap();
+    let theta = |r: u64| a + r as f64 * 1e-3;
+    for r in 1..=64 {
+        let patch = write(
+            "PATCH",
+            "/v1/channels/left/tiles",
+            Some(r),
+            nudge(5, 5, theta(r)),
+        );
+        assert_eq!(call(&s, patch).await.0, StatusCode::OK);
+    }
+    let resource = "channels/left/tiles";
+    let rows = |db: &Db| db.history(Some(resource), 1000, None).unwrap();
+    // Compacted at revision 64 to 55..=64; 65 written after.
+    let kept: Vec<u64> = rows(&s.store.db).iter().map(|r| r.revision).collect();
+    assert_eq!(kept, (55..=65).rev().collect::<Vec<_>>());
+    let at = |b: &[u8]| json(b)["tiles"]["layout"]["features"][5 * 33 + 5]["theta"].as_f64();
+    let (st, _, b) = call(&s, get("/v1/channels/left/tiles?revision=55")).await;
+    assert_eq!((st, at(&b)), (StatusCode::OK, Some(theta(54))));
+    let (st, _, _) = call(&s, get("/v1/channels/left/tiles?revision=54")).await;
+    assert_eq!(st, StatusCode::NOT_FOUND);
+    // Undo walks back to 55, then finds the rest dropped.
+    let mut current = 65;
+    for _ in 55..65 {
+        let undo = write(
+            "POST",
+            "/v1/channels/left/tiles/undo",
+            Some(current),
+            String::new(),
+        );
+        let (st, _, body) = call(&s, undo).await;
+        assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+        current += 1;
+    }
+    let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(at(&b), Some(theta(54)));
+    let undo = write(
+        "POST",
+        "/v1/channels/left/tiles/undo",
+        Some(current),
+        String::new(),
+    );
+    let (st, _, body) = call(&s, undo).await;
+    assert_eq!(st, StatusCode::CONFLICT);
+    assert!(
+        json(&body)["error"]
+            .as_str()
+            .unwrap()
+            .contains("no longer in the history"),
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    drop(s);
+    // After a restart with the default retention, every kept revision still rebuilds.
+    let store = open(Retention::default());
+    for r in 55..=current {
+        assert!(store.db.at(resource, r).unwrap().is_some(), "revision {r}");
+    }
+    drop(store);
+
+    // Age and size, on the database alone: documents of 10 kB that share nothing, so each
+    // row is a snapshot.
+    let db = Db::open(None).unwrap();
+    let meta = Meta {
+        who: "test".into(),
+        action: "put",
+        request: None,
+        undo_to: None,
+        redo_to: None,
+    };
+    for r in 1..=20u64 {
+        let doc = serde_json::json!({"text": r.to_string().repeat(10_000 / r.to_string().len())});
+        db.write("doc", None, (r, &doc), &meta).unwrap();
+    }
+    db.set_retention(Retention {
+        bytes: 50_000,
+        ..Retention::default()
+    })
+    .unwrap();
+    let kept = |db: &Db| -> Vec<u64> {
+        let rows = db.history(Some("doc"), 100, None).unwrap();
+        rows.iter().map(|r| r.revision).collect()
+    };
+    // A row holds its patch and its snapshot (each a whole document here): two fit.
+    assert_eq!(kept(&db), [20, 19]);
+    assert_eq!(
+        db.at("doc", 20).unwrap().unwrap()["text"]
+            .as_str()
+            .unwrap()
+            .len(),
+        10_000
+    );
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    db.set_retention(Retention {
+        max_age: std::time::Duration::from_millis(10),
+        ..Retention::default()
+    })
+    .unwrap();
+    assert_eq!(
+        kept(&db),
+        [20],
+        "only the current revision outlives the age"
     );
 }
 

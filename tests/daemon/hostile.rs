@@ -146,6 +146,64 @@ async fn a_rig_whose_warps_exceed_the_memory_budget_is_refused_and_never_saved()
     healthy(&s).await;
 }
 
+/// A mesh screen is counted in the memory budget with the warps, from its triangle count before
+/// anything is built: a 5 MiB OBJ of polygons fanning into a million triangles (288 MB to read
+/// and index) is refused under a 768 MiB budget of which the demo rig's warps take 569, while a mesh
+/// within what is left is taken.
+#[tokio::test]
+async fn a_mesh_is_counted_in_the_memory_budget_before_it_is_built() {
+    let dir = tempfile::tempdir().unwrap();
+    let budget = 768 << 20;
+    let store = Store::open_with(
+        Some(dir.path().to_path_buf()),
+        OpenOptions {
+            initial: Some(demo_rig()),
+            memory_budget: budget,
+            ..OpenOptions::default()
+        },
+    )
+    .unwrap();
+    let s = AppState::with_options(
+        store,
+        Options {
+            memory_budget: budget,
+            ..Options::default()
+        },
+    );
+    let ring = 1000;
+    let mut many = String::from("v 0 0 -3\n");
+    for i in 0..ring {
+        let a = i as f64 / ring as f64 * std::f64::consts::TAU;
+        many += &format!("v {} {} -3\n", 3.0 * a.cos(), 3.0 * a.sin());
+    }
+    let polygon: Vec<String> = (1..=ring + 1).map(|i| i.to_string()).collect();
+    let polygon = format!("f {}\n", polygon.join(" "));
+    many += &polygon.repeat(1_000_000 / (ring - 1) + 1);
+    assert!(many.len() < 6 << 20, "{} bytes", many.len());
+    for (name, obj) in [("many.obj", many), ("fan.obj", fan(100_000, -3.0))] {
+        let upload = Request::put(format!("/v1/meshes/{name}"))
+            .body(Body::from(obj))
+            .unwrap();
+        assert_eq!(call(&s, upload).await.0, StatusCode::CREATED);
+    }
+    let t = Instant::now();
+    let (st, body) = put_rig(&s, &with_mesh(&s, "many.obj")).await;
+    assert_eq!(
+        (st, body["field"].as_str()),
+        (StatusCode::BAD_REQUEST, Some("/screen/obj")),
+        "{body}"
+    );
+    let why = body["error"].as_str().unwrap();
+    assert!(
+        why.starts_with("`many.obj`: its 1000998 triangles need 274 MiB")
+            && why.contains("memory budget"),
+        "{why}"
+    );
+    assert!(t.elapsed() < Duration::from_secs(2), "{:?}", t.elapsed());
+    let (st, body) = put_rig(&s, &with_mesh(&s, "fan.obj")).await;
+    assert_eq!(st, StatusCode::OK, "{body}");
+}
+
 #[tokio::test]
 async fn smoothing_iterations_are_bounded() {
     let s = state(None, None);
@@ -181,6 +239,72 @@ async fn smoothing_iterations_are_bounded() {
     .await;
     assert_eq!(st, StatusCode::OK);
     healthy(&s).await;
+}
+
+/// One PATCH does a bounded amount of work (1000 × smooth(1000), each edit within its own
+/// limits, used to hold the channel for minutes), and reads of the channel never wait on a
+/// write in progress: they see the last committed revision.
+#[tokio::test]
+async fn a_patch_is_bounded_in_work_and_reads_do_not_wait_on_it() {
+    let s = state(None, None);
+    let smooths = |n: usize| {
+        let edits: Vec<_> = (0..n)
+            .map(|_| serde_json::json!({"op": "smooth", "iterations": 1000}))
+            .collect();
+        serde_json::json!({"edits": edits}).to_string()
+    };
+    let t = Instant::now();
+    let (st, _, body) = call(
+        &s,
+        write("PATCH", "/v1/channels/left/tiles", Some(1), smooths(1000)),
+    )
+    .await;
+    let body = json(&body);
+    assert_eq!(st, StatusCode::BAD_REQUEST, "{body}");
+    let field = body["field"].as_str().unwrap().to_string();
+    assert!(
+        field.starts_with("/edits/") && field != "/edits/0",
+        "{body}"
+    );
+    assert!(body["error"].as_str().unwrap().contains("limit"), "{body}");
+    assert!(t.elapsed() < Duration::from_secs(10), "{:?}", t.elapsed());
+    // Just under the bound (the field names the first edit past it): a write of a second or
+    // more, during which the channel's reads are answered at once from revision 1.
+    let within: usize = field["/edits/".len()..].parse().unwrap();
+    let _ = call(&s, get("/v1/channels/left/render?scale=4")).await;
+    let writer = {
+        let s = s.clone();
+        tokio::spawn(async move {
+            let t = Instant::now();
+            let patch = write("PATCH", "/v1/channels/left/tiles", Some(1), smooths(within));
+            let (st, _, _) = call(&s, patch).await;
+            (st, t.elapsed())
+        })
+    };
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    for uri in [
+        "/v1/channels/left/tiles",
+        "/v1/channels/left/content",
+        "/v1/channels/left/render?scale=4",
+    ] {
+        let t = Instant::now();
+        let (st, _, b) = call(&s, get(uri)).await;
+        assert_eq!(st, StatusCode::OK, "{uri}: {}", String::from_utf8_lossy(&b));
+        assert!(
+            t.elapsed() < Duration::from_secs(1),
+            "{uri} waited {:?}",
+            t.elapsed()
+        );
+        if uri.ends_with("tiles") {
+            assert_eq!(json(&b)["revision"], 1, "a write in progress is not seen");
+        }
+    }
+    assert!(!writer.is_finished(), "the write should still be running");
+    let (st, took) = writer.await.unwrap();
+    assert_eq!(st, StatusCode::OK);
+    eprintln!("{within} × smooth(1000) took {took:?}");
+    let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
+    assert_eq!(json(&b)["revision"], 2);
 }
 
 /// A rig whose screen is the mesh `obj`.
@@ -256,6 +380,101 @@ async fn mesh_screens_come_from_the_mesh_directories_only() {
         .body(Body::from(wall))
         .unwrap();
     assert_ne!(call(&s, traversal).await.0, StatusCode::CREATED);
+    healthy(&s).await;
+}
+
+/// Uploaded meshes stay within a quota of files and bytes (507 beyond, until one is deleted);
+/// `DELETE /v1/meshes/{name}` removes one the current rig does not show (409 for the one it
+/// shows); and a mesh deleted and uploaded again with another shape is another mesh to the
+/// warp cache, on disk too.
+#[tokio::test]
+async fn meshes_keep_to_a_quota_and_can_be_deleted() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = state(Some(dir.path()), None);
+    let upload = |name: &str, obj: String| {
+        Request::put(format!("/v1/meshes/{name}"))
+            .body(Body::from(obj))
+            .unwrap()
+    };
+    let delete = |name: &str| {
+        Request::delete(format!("/v1/meshes/{name}"))
+            .body(Body::empty())
+            .unwrap()
+    };
+    assert_eq!(
+        call(&s, upload("m.obj", fan(64, -3.0))).await.0,
+        StatusCode::CREATED
+    );
+    let (st, body) = put_rig(&s, &with_mesh(&s, "m.obj")).await;
+    assert_eq!(st, StatusCode::OK, "{body}");
+    let (st, _, first) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert_eq!(st, StatusCode::OK);
+    // The keeper writes the warp to warps/ a second after the channel's last change.
+    let since = Instant::now();
+    let kept = |d: std::fs::ReadDir| {
+        d.flatten()
+            .any(|e| !e.file_name().to_string_lossy().starts_with('.'))
+    };
+    while !std::fs::read_dir(dir.path().join("warps")).is_ok_and(kept) {
+        assert!(since.elapsed() < Duration::from_secs(30), "no warp kept");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let (st, _, body) = call(&s, delete("m.obj")).await;
+    assert_eq!(
+        st,
+        StatusCode::CONFLICT,
+        "{}",
+        String::from_utf8_lossy(&body)
+    );
+    let mesh_rig = with_mesh(&s, "m.obj");
+    let (st, _) = put_rig(
+        &s,
+        &serde_json::to_value(common::server::demo_rig()).unwrap(),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK);
+    assert_eq!(call(&s, delete("m.obj")).await.0, StatusCode::NO_CONTENT);
+    assert_eq!(call(&s, delete("m.obj")).await.0, StatusCode::NOT_FOUND);
+    assert!(!dir.path().join("meshes/m.obj").exists());
+    // The same name, another wall: the rig document is the same as before, the warp is not.
+    assert_eq!(
+        call(&s, upload("m.obj", fan(64, -4.0))).await.0,
+        StatusCode::CREATED
+    );
+    let (st, body) = put_rig(&s, &mesh_rig).await;
+    assert_eq!(st, StatusCode::OK, "{body}");
+    let (_, _, second) = call(&s, get("/v1/channels/left/warp.exr")).await;
+    assert_ne!(
+        first, second,
+        "a warp of the deleted mesh was served for the new one"
+    );
+
+    // The quota: as many files as it allows, then 507 naming it, and room again after a delete.
+    let most = omniwarp::limits::MESHES;
+    for n in 1..most {
+        let (st, _, body) = call(&s, upload(&format!("q{n}.obj"), fan(3, -3.0))).await;
+        assert_eq!(
+            st,
+            StatusCode::CREATED,
+            "{n}: {}",
+            String::from_utf8_lossy(&body)
+        );
+    }
+    let (st, _, body) = call(&s, upload("one-more.obj", fan(3, -3.0))).await;
+    let body = json(&body);
+    assert_eq!(st, StatusCode::INSUFFICIENT_STORAGE, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("quota of 256 files"),
+        "{body}"
+    );
+    assert_eq!(call(&s, delete("q1.obj")).await.0, StatusCode::NO_CONTENT);
+    assert_eq!(
+        call(&s, upload("one-more.obj", fan(3, -3.0))).await.0,
+        StatusCode::CREATED
+    );
     healthy(&s).await;
 }
 
@@ -553,7 +772,7 @@ async fn a_tile_grid_whose_size_overflows_is_refused_from_a_client_and_from_disk
     )
     .unwrap();
     let left = reset.channel("left").unwrap();
-    let g = left.try_lock().unwrap();
+    let g = left.read();
     assert_eq!((g.tiles.revision, g.tiles.value.is_none()), (3, true));
 }
 
@@ -1316,11 +1535,13 @@ fn the_limits_are_documented_where_users_read_them() {
         l::TILE_FEATURES.to_string(),
         l::EDITS_PER_PATCH.to_string(),
         l::SMOOTH_ITERATIONS.to_string(),
+        l::EDIT_WORK.to_string(),
         l::CALIBRATION_POINTS.to_string(),
         l::PROPOSALS.to_string(),
         l::EXPORT_NODES.to_string(),
         l::FEATURE_VALUE.to_string(),
         l::CAPTURE_SLOTS.to_string(),
+        l::MESHES.to_string(),
         omniwarp::server::STREAMS.to_string(),
         omniwarp::server::FEEDS.to_string(),
         omniwarp::server::RESERVE.to_string(),

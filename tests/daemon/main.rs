@@ -13,3 +13,4 @@ mod hostile;
 mod pressure;
 mod server;
 mod server_edit;
+mod tls;

@@ -265,13 +265,16 @@ pub async fn guard(
     Ok(resp)
 }
 
-/// With a token configured, every request but the console's own files must carry
-/// `Authorization: Bearer <token>`.
+/// With a token configured, every request but the console's own files and `/v1/version`
+/// must carry `Authorization: Bearer <token>`. The version answers without it since it is what
+/// a client checks before sending the token: over TLS it carries the certificate's
+/// fingerprint, which the console shows beside its token prompt.
 fn authorized(s: &AppState, req: &Request) -> bool {
     let Some(token) = &s.options.token else {
         return true;
     };
-    if is_console_file(req.method(), req.uri().path()) {
+    let public = req.method() == Method::GET && req.uri().path() == "/v1/version";
+    if public || is_console_file(req.method(), req.uri().path()) {
         return true;
     }
     let given = req

@@ -51,6 +51,13 @@ pub fn keys(
     serde_json::to_vec(&rig.doc)
         .expect("rigs serialise")
         .hash(&mut h);
+    // The document names a mesh; a mesh deleted and uploaded again under its name is another.
+    if let crate::surface::Screen::Mesh {
+        loaded: Some(mesh), ..
+    } = &rig.doc.screen
+    {
+        mesh.digest().hash(&mut h);
+    }
     let geometry = h.finish();
     serde_json::to_vec(tiles)
         .expect("tile screens serialise")
@@ -155,11 +162,11 @@ pub async fn inputs(s: &Arc<AppState>, id: &str) -> Result<Inputs, ApiError> {
         .channel(id)
         .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
     let (tiles, tiles_revision, canvas) = {
-        let g = data.lock().await;
+        let now = data.read();
         (
-            g.tiles.value.clone(),
-            g.tiles.revision,
-            g.content.value.clone(),
+            now.tiles.value.clone(),
+            now.tiles.revision,
+            now.content.value.clone(),
         )
     };
     let (geometry_key, key) = keys(&rig, id, &tiles, canvas.project_from);

@@ -55,6 +55,8 @@ pub struct Options {
     /// Connections open at once (see [`crate::server::CONNECTIONS`]); lowered at start to what
     /// the process's file limit allows.
     pub connections: usize,
+    /// Serve TLS with this identity (`None`: plain HTTP, loopback's default).
+    pub tls: Option<crate::server::tls::Tls>,
 }
 
 impl Default for Options {
@@ -66,6 +68,7 @@ impl Default for Options {
             allow_origins: Vec::new(),
             user: "local".into(),
             connections: crate::server::CONNECTIONS,
+            tls: None,
         }
     }
 }

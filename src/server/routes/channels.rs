@@ -9,7 +9,9 @@ use crate::server::http::state::{
 };
 use crate::server::storage::canvas::Canvas;
 use crate::server::storage::db::Meta;
-use crate::server::storage::store::{ChannelData, Versioned, content_resource, tiles_resource};
+use crate::server::storage::store::{
+    Channel, ChannelData, ChannelWriter, Versioned, content_resource, tiles_resource,
+};
 use crate::tiles::edit::Edit;
 use crate::tiles::{Layout, TileScreen};
 use axum::body::Bytes;
@@ -18,16 +20,12 @@ use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
 use std::sync::Arc;
-use tokio::sync::OwnedMutexGuard;
 
 fn not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("no channel `{id}`"))
 }
 
-async fn data(
-    s: &Arc<AppState>,
-    id: &str,
-) -> Result<Arc<tokio::sync::Mutex<ChannelData>>, ApiError> {
+async fn data(s: &Arc<AppState>, id: &str) -> Result<Arc<Channel>, ApiError> {
     s.store.channel(id).ok_or_else(|| not_found(id))
 }
 
@@ -94,7 +92,7 @@ impl Part {
 pub async fn commit(
     s: &Arc<AppState>,
     id: &str,
-    mut held: OwnedMutexGuard<ChannelData>,
+    mut held: ChannelWriter,
     next: ChannelData,
     part: Part,
     mut meta: Meta,
@@ -125,7 +123,7 @@ pub async fn commit(
                 .store
                 .save_doc(&resource, (before.0, &before.1), (after.0, &after.1), &meta)?;
         }
-        *held = next;
+        held.set(next);
         state.announce(
             serde_json::json!({"kind": part.kind(), "channel": id, "revision": revision}),
         );
@@ -186,10 +184,7 @@ pub async fn get_content(
     Query(q): Query<AtRevision>,
 ) -> Result<Response, ApiError> {
     let d = data(&s, &id).await?;
-    let (revision, content) = {
-        let g = d.lock().await;
-        Part::Content.of(&g)
-    };
+    let (revision, content) = { Part::Content.of(&d.read()) };
     let (revision, content) = match q.revision {
         Some(r) if r != revision => (r, document_at(&s, content_resource(&id), r).await?),
         _ => (revision, content),
@@ -211,7 +206,7 @@ pub async fn put_content(
     canvas.view()?;
     canvas.centre(&s.store.snapshot().0)?;
     let d = data(&s, &id).await?;
-    let g = d.lock_owned().await;
+    let g = d.write().await;
     fresh(g.content.revision, wanted)?;
     let revision = wanted + 1;
     let mut next = g.clone();
@@ -232,8 +227,8 @@ pub async fn get_tiles(
 ) -> Result<Response, ApiError> {
     let d = data(&s, &id).await?;
     let (mut revision, mut value) = {
-        let g = d.lock().await;
-        (g.tiles.revision, g.tiles.value.clone())
+        let now = d.read();
+        (now.tiles.revision, now.tiles.value.clone())
     };
     if let Some(r) = q.revision.filter(|r| *r != revision) {
         let doc = document_at(&s, tiles_resource(&id), r).await?;
@@ -291,7 +286,7 @@ async fn replace_tiles(
     action: &'static str,
 ) -> Result<Response, ApiError> {
     let d = data(s, id).await?;
-    let g = d.lock_owned().await;
+    let g = d.write().await;
     fresh(g.tiles.revision, wanted)?;
     let revision = wanted + 1;
     let mut next = g.clone();
@@ -337,7 +332,7 @@ pub async fn patch_tiles(
         });
     }
     let d = data(&s, &id).await?;
-    let g = d.lock_owned().await;
+    let g = d.write().await;
     let current = g.tiles.revision;
     if current < wanted || (current > wanted && !patch.merge) {
         return Err(ApiError::Stale { current });
@@ -351,10 +346,19 @@ pub async fn patch_tiles(
         .map(|v| v["edits"].clone());
     let (id2, edits, state) = (id.clone(), patch.edits, s.clone());
     let mut screen = run_write(&s, move |cancel| {
+        let after = apply_edits(&rig, &id2, start.clone(), edits.clone(), cancel)?;
         if current > wanted {
-            merges(&state, &rig, &id2, wanted, current, &edits, cancel)?;
+            merges(
+                &state,
+                &rig,
+                &id2,
+                (wanted, current),
+                &edits,
+                (start, &after),
+                cancel,
+            )?;
         }
-        apply_edits(&rig, &id2, start, edits, cancel)
+        Ok(after)
     })
     .await?;
     let revision = current + 1;
@@ -368,17 +372,21 @@ pub async fn patch_tiles(
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 
-/// Whether `edits`, written against revision `base`, can be applied on top of `current`: the
-/// features they change (applied to `base`) and those every revision since changed (from the
-/// history's patches) must not meet, and nothing else may have changed (grid size, source,
-/// interpolation, a whole screen put). Otherwise 412 with the current revision.
+/// Whether `edits`, written against revision `base` and applied to the screen of revision
+/// `current` (`now`, giving `after`), merge: judged on what the edits change, not on what they
+/// name. The features they change where the client saw the screen and where it is now must not
+/// meet those any revision since changed (from the history's patches), and the edits must do
+/// the same in both places: outside the features others changed, the two results agree (a
+/// smooth whose neighbours moved does something else). Anything but features changing (grid
+/// size, source, interpolation, a whole screen put) does not merge. Otherwise 412 with the
+/// current revision.
 fn merges(
     s: &AppState,
     rig: &Rig,
     id: &str,
-    base: u64,
-    current: u64,
+    (base, current): (u64, u64),
     edits: &[Edit],
+    (now, after): (Option<TileScreen>, &TileScreen),
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<(), ApiError> {
     let stale = || ApiError::Stale { current };
@@ -387,19 +395,24 @@ fn merges(
     let before: Option<TileScreen> =
         serde_json::from_value(doc).map_err(|e| ApiError::Internal(e.to_string()))?;
     let ch = rig.channel(id).map_err(|_| not_found(id))?;
-    let before = match before {
-        Some(t) => t,
-        None => rig.default_tiles(ch)?,
+    let or_sampled = |t: Option<TileScreen>| match t {
+        Some(t) => Ok::<_, ApiError>(t),
+        None => Ok(rig.default_tiles(ch)?),
     };
-    let after = apply_edits(rig, id, Some(before.clone()), edits.to_vec(), cancel)?;
+    let (before, now) = (or_sampled(before)?, or_sampled(now)?);
+    let seen_after = apply_edits(rig, id, Some(before.clone()), edits.to_vec(), cancel)?;
     let json = |t: &TileScreen| serde_json::to_value(t).expect("tile screens serialise");
-    let mine = touched(&json_patch::diff(&json(&before), &json(&after))).ok_or_else(stale)?;
+    let changes = |a: &TileScreen, b: &TileScreen| {
+        touched(&json_patch::diff(&json(a), &json(b))).ok_or_else(stale)
+    };
     let mut theirs = std::collections::BTreeSet::new();
     for r in base + 1..=current {
         let patch = s.store.db.patch_of(&resource, r)?.ok_or_else(stale)?;
         theirs.extend(touched(&patch).ok_or_else(stale)?);
     }
-    if mine.is_disjoint(&theirs) {
+    let mut mine = changes(&before, &seen_after)?;
+    mine.extend(changes(&now, after)?);
+    if mine.is_disjoint(&theirs) && changes(&seen_after, after)?.is_subset(&theirs) {
         Ok(())
     } else {
         Err(stale())
@@ -440,9 +453,23 @@ fn apply_edits(
         Some(t) => t,
         None => rig.default_tiles(ch)?,
     };
+    let mut work = 0u64;
     for (n, e) in edits.into_iter().enumerate() {
         if cancel.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(crate::Error::Cancelled.into());
+        }
+        // Bounded by what it would do, not by the clock, so a request is refused or not
+        // whatever the machine's load.
+        work = work.saturating_add(e.work(screen.feature_count()));
+        let limit = crate::limits::EDIT_WORK;
+        if n > 0 && work > limit {
+            return Err(ApiError::Invalid {
+                field: format!("/edits/{n}"),
+                reason: format!(
+                    "brings this request's work to {work} feature visits, above the limit of \
+                     {limit}; nothing was applied: send the edits from here on in another PATCH"
+                ),
+            });
         }
         let named = |err: crate::Error| match err {
             crate::Error::Invalid { name, reason } => ApiError::Invalid {

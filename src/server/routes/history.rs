@@ -108,6 +108,16 @@ fn plan_in(
             format!("nothing to {what}: revision {current} of {resource} has no {what} step"),
         )
     };
+    let dropped = |to: u64| {
+        ApiError::refused(
+            StatusCode::CONFLICT,
+            None,
+            format!(
+                "revision {to} of {resource} is no longer in the history (it keeps what the \
+                 daemon's --history-* settings allow)"
+            ),
+        )
+    };
     let m = |action: &'static str, to: u64| Meta {
         action,
         request: Some(serde_json::json!({ "revision": to })),
@@ -133,8 +143,9 @@ fn plan_in(
             let to = row(current)?
                 .and_then(|r| r.undo_to)
                 .ok_or_else(|| nothing("undo"))?;
+            let target = row(to)?.ok_or_else(|| dropped(to))?;
             let mut meta = m("undo", to);
-            meta.undo_to = row(to)?.and_then(|r| r.undo_to);
+            meta.undo_to = target.undo_to;
             meta.redo_to = Some(current);
             Ok((to, meta))
         }
@@ -142,10 +153,10 @@ fn plan_in(
             let to = row(current)?
                 .and_then(|r| r.redo_to)
                 .ok_or_else(|| nothing("redo"))?;
-            let target = row(to)?;
+            let target = row(to)?.ok_or_else(|| dropped(to))?;
             let mut meta = m("redo", to);
-            meta.undo_to = target.as_ref().and_then(|r| r.undo_to);
-            meta.redo_to = target.and_then(|r| r.redo_to);
+            meta.undo_to = target.undo_to;
+            meta.redo_to = target.redo_to;
             Ok((to, meta))
         }
     }
@@ -238,7 +249,7 @@ async fn channel_step(
         .store
         .channel(&id)
         .ok_or_else(|| ApiError::NotFound(format!("no channel `{id}`")))?;
-    let g = d.lock_owned().await;
+    let g = d.write().await;
     let (current, _) = part.of(&g);
     if wanted != current {
         return Err(ApiError::Stale { current });

@@ -31,8 +31,16 @@ pub async fn health(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
     }))
 }
 
-pub async fn version() -> Json<serde_json::Value> {
-    Json(serde_json::json!({"name": "omniwarp", "version": env!("CARGO_PKG_VERSION"), "api": "v1"}))
+/// The daemon's name, version and API; over TLS also its certificate's fingerprint, which the
+/// console shows beside the token prompt for the technician to compare with what the daemon
+/// printed at start.
+pub async fn version(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
+    let mut v =
+        serde_json::json!({"name": "omniwarp", "version": env!("CARGO_PKG_VERSION"), "api": "v1"});
+    if let Some(tls) = &s.options.tls {
+        v["tls_sha256"] = tls.fingerprint().into();
+    }
+    Json(v)
 }
 
 pub async fn get_rig(

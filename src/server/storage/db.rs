@@ -81,11 +81,40 @@ pub struct Meta {
     pub redo_to: Option<u64>,
 }
 
+/// How much of each document's history is kept: a row goes when it is beyond the newest
+/// `revisions`, older than `max_age`, or beyond the newest `bytes` of that document's history,
+/// whichever comes first; the current revision always stays, and the oldest row kept becomes a
+/// full snapshot, so every revision still listed can be rebuilt, reverted to and merged from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Retention {
+    /// Revisions of one document kept at most.
+    pub revisions: u64,
+    /// Rows older than this go.
+    pub max_age: std::time::Duration,
+    /// Bytes of one document's history (patches and snapshots) kept at most.
+    pub bytes: u64,
+}
+
+impl Default for Retention {
+    fn default() -> Self {
+        Retention {
+            revisions: 10_000,
+            max_age: std::time::Duration::from_secs(365 * 86_400),
+            bytes: 256 << 20,
+        }
+    }
+}
+
+/// A document's history is compacted whenever its revision reaches a multiple of this, so the
+/// cost is spread over the writes.
+pub const COMPACT_EVERY: u64 = 64;
+
 /// The daemon's SQLite database (a file in the data directory, or in memory without one):
 /// the current documents, their history and the calibration proposals.
 pub struct Db {
     conn: Mutex<Connection>,
     committed: Mutex<Option<CommitHook>>,
+    retention: Mutex<Retention>,
 }
 
 /// Called with the resource's name after each write is committed (see [`Db::on_commit`]).
@@ -161,6 +190,7 @@ impl Db {
         Ok(Db {
             conn: Mutex::new(conn),
             committed: Mutex::new(None),
+            retention: Mutex::new(Retention::default()),
         })
     }
 
@@ -249,6 +279,7 @@ impl Db {
         tx.commit().map_err(fail)?;
         drop(conn);
         self.committed(resource);
+        self.compact_now_and_then(resource, after.0);
         Ok(())
     }
 
@@ -280,6 +311,7 @@ impl Db {
         tx.commit().map_err(fail)?;
         drop(conn);
         self.committed(resource);
+        self.compact_now_and_then(resource, to);
         Ok(true)
     }
 
@@ -295,6 +327,89 @@ impl Db {
         if let Some(hook) = hook {
             hook(resource);
         }
+    }
+
+    /// Keeps the history within `retention` from now on, compacting every document now.
+    pub fn set_retention(&self, retention: Retention) -> crate::Result<()> {
+        *self.retention.lock().expect("retention lock") = retention;
+        let names: Vec<String> = {
+            let conn = self.conn();
+            let mut st = conn.prepare("SELECT name FROM resources").map_err(fail)?;
+            st.query_map([], |r| r.get(0))
+                .map_err(fail)?
+                .collect::<Result<_, _>>()
+                .map_err(fail)?
+        };
+        for name in names {
+            self.compact(&name)?;
+        }
+        Ok(())
+    }
+
+    /// A write is durable once committed: a compaction that fails after it is logged, not
+    /// reported to the writer, and tried again at the next multiple.
+    fn compact_now_and_then(&self, resource: &str, revision: u64) {
+        if revision.is_multiple_of(COMPACT_EVERY)
+            && let Err(e) = self.compact(resource)
+        {
+            tracing::error!(resource, error = %e, "could not compact the history");
+        }
+    }
+
+    /// Drops the rows of `resource` beyond the retention (see [`Retention`]); returns how many
+    /// went. The oldest row kept becomes a snapshot in the same transaction.
+    pub fn compact(&self, resource: &str) -> crate::Result<usize> {
+        let keep = *self.retention.lock().expect("retention lock");
+        let oldest_ms = now_ms().saturating_sub(keep.max_age.as_millis() as i64);
+        let mut conn = self.conn();
+        let tx = write_transaction(&mut conn)?;
+        let rows: Vec<(u64, i64, u64)> = {
+            let mut st = tx
+                .prepare(
+                    "SELECT revision, at_ms, COALESCE(LENGTH(patch), 0)
+                     + COALESCE(LENGTH(snapshot), 0) FROM history WHERE resource = ?1
+                     ORDER BY revision DESC",
+                )
+                .map_err(fail)?;
+            st.query_map([resource], |r| {
+                Ok((
+                    r.get::<_, i64>(0)? as u64,
+                    r.get(1)?,
+                    r.get::<_, i64>(2)? as u64,
+                ))
+            })
+            .map_err(fail)?
+            .collect::<Result<_, _>>()
+            .map_err(fail)?
+        };
+        let mut bytes = 0u64;
+        let mut first_kept = None;
+        for (n, (revision, at_ms, size)) in rows.iter().enumerate() {
+            bytes = bytes.saturating_add(*size);
+            let within = (n as u64) < keep.revisions && *at_ms >= oldest_ms && bytes <= keep.bytes;
+            if n > 0 && !within {
+                break;
+            }
+            first_kept = Some(*revision);
+        }
+        let Some(first) = first_kept.filter(|_| first_kept != rows.last().map(|r| r.0)) else {
+            return Ok(0);
+        };
+        let doc = at_in(&tx, resource, first)?
+            .ok_or_else(|| fail(format!("{resource} lost revision {first}")))?;
+        tx.execute(
+            "UPDATE history SET snapshot = ?3 WHERE resource = ?1 AND revision = ?2",
+            params![resource, first as i64, doc.to_string()],
+        )
+        .map_err(fail)?;
+        let dropped = tx
+            .execute(
+                "DELETE FROM history WHERE resource = ?1 AND revision < ?2",
+                params![resource, first as i64],
+            )
+            .map_err(fail)?;
+        tx.commit().map_err(fail)?;
+        Ok(dropped)
     }
 
     /// The document of `resource` at `revision`, rebuilt from its history.

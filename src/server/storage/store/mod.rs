@@ -29,6 +29,58 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, RwLock};
 
+/// One channel's state as two views of it: writers take turns on `writer` (a write holds it
+/// from its revision check to its commit, which may be seconds of resampling), while readers
+/// take the last committed state from `seen` and never wait on a write in progress.
+pub struct Channel {
+    writer: Arc<tokio::sync::Mutex<ChannelData>>,
+    seen: RwLock<Arc<ChannelData>>,
+}
+
+impl Channel {
+    fn new(data: ChannelData) -> Channel {
+        Channel {
+            seen: RwLock::new(Arc::new(data.clone())),
+            writer: Arc::new(tokio::sync::Mutex::new(data)),
+        }
+    }
+
+    /// The state as last committed.
+    pub fn read(&self) -> Arc<ChannelData> {
+        self.seen.read().expect("no reader panics").clone()
+    }
+
+    /// The channel for writing, once the writers before have finished.
+    pub async fn write(self: &Arc<Self>) -> ChannelWriter {
+        ChannelWriter {
+            held: self.writer.clone().lock_owned().await,
+            channel: self.clone(),
+        }
+    }
+}
+
+/// A writer's hold on a channel (see [`Channel::write`]); reads as the current state.
+pub struct ChannelWriter {
+    held: tokio::sync::OwnedMutexGuard<ChannelData>,
+    channel: Arc<Channel>,
+}
+
+impl ChannelWriter {
+    /// Makes `next` the channel's state, for the next writer and for readers; call once it is
+    /// durable.
+    pub fn set(&mut self, next: ChannelData) {
+        *self.channel.seen.write().expect("no reader panics") = Arc::new(next.clone());
+        *self.held = next;
+    }
+}
+
+impl std::ops::Deref for ChannelWriter {
+    type Target = ChannelData;
+    fn deref(&self) -> &ChannelData {
+        &self.held
+    }
+}
+
 /// A value and its revision, as stored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -98,7 +150,7 @@ pub struct Store {
     current: RwLock<(Arc<Rig>, u64)>,
     /// Serialises rig writers, so revision checks and durability happen in order.
     pub rig_writer: Arc<tokio::sync::Mutex<()>>,
-    channels: Mutex<HashMap<String, Arc<tokio::sync::Mutex<ChannelData>>>>,
+    channels: Mutex<HashMap<String, Arc<Channel>>>,
     /// Calibration proposals waiting to be applied, by id.
     pub proposals: Mutex<HashMap<u64, Arc<Proposal>>>,
     /// The id the next proposal gets, taken only by a proposal that is saved (see
@@ -118,6 +170,8 @@ pub struct OpenOptions {
     pub memory_budget: u64,
     /// A read-only directory of meshes a rig may name besides uploaded ones (`--assets`).
     pub assets: Option<PathBuf>,
+    /// How much of each document's history is kept.
+    pub retention: db::Retention,
 }
 
 impl Default for OpenOptions {
@@ -127,6 +181,7 @@ impl Default for OpenOptions {
             reset: false,
             memory_budget: crate::limits::MEMORY_BUDGET,
             assets: None,
+            retention: db::Retention::default(),
         }
     }
 }
@@ -236,6 +291,7 @@ impl Store {
             }
             None => Db::open(None)?,
         };
+        db.set_retention(o.retention)?;
         let loaded = load_valid(&db, "rig", |v| {
             let doc: RigDoc = from_json(v)?;
             meshes.accept(doc, o.memory_budget)
@@ -269,7 +325,7 @@ impl Store {
         let mut channels = HashMap::new();
         for ch in &rig.channels {
             let data = load_channel(&db, &ch.id, o.reset)?;
-            channels.insert(ch.id.clone(), Arc::new(tokio::sync::Mutex::new(data)));
+            channels.insert(ch.id.clone(), Arc::new(Channel::new(data)));
         }
         let proposals = load_proposals(&db, &rig);
         let next = proposals.keys().max().map_or(1, |m| m + 1);
@@ -320,13 +376,14 @@ impl Store {
 
     /// The editable state of channel `id` of the current rig (a channel new to the rig starts
     /// from the defaults, or from what a former rig's channel of that id left).
-    pub fn channel(&self, id: &str) -> Option<Arc<tokio::sync::Mutex<ChannelData>>> {
+    pub fn channel(&self, id: &str) -> Option<Arc<Channel>> {
         let (rig, _) = self.snapshot();
         rig.channel(id).ok()?;
         let mut map = self.channels.lock().expect("channel map lock");
         let entry = map.entry(id.to_string()).or_insert_with(|| {
-            let data = load_channel(&self.db, id, true).unwrap_or_default();
-            Arc::new(tokio::sync::Mutex::new(data))
+            Arc::new(Channel::new(
+                load_channel(&self.db, id, true).unwrap_or_default(),
+            ))
         });
         Some(entry.clone())
     }
@@ -556,7 +613,8 @@ impl MeshDirs {
     /// A rig document with its mesh loaded from these directories, validated and within
     /// `budget`.
     pub fn accept(&self, mut doc: RigDoc, budget: u64) -> crate::Result<Rig> {
-        doc.screen.load_with("/screen", |n| self.path(n))?;
+        let left = budget.saturating_sub(doc.warp_bytes());
+        doc.screen.load_with("/screen", |n| self.path(n), left)?;
         let rig = Rig::from_doc(doc)?;
         rig.check_budget(budget)?;
         Ok(rig)
