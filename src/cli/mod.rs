@@ -26,6 +26,7 @@ mod normal_map;
 mod pattern;
 mod projections;
 mod render;
+mod rig;
 mod scene;
 mod serve;
 mod simulate;
@@ -72,6 +73,9 @@ enum Command {
     /// Lens models: project points and unproject pixels in batches (JSON).
     #[command(subcommand)]
     Lens(lens::LensCommand),
+    /// Rig files: check one and see what each projector covers.
+    #[command(subcommand)]
+    Rig(rig::RigCommand),
     /// A rig channel's warp map (EXR): which content direction each projector pixel shows.
     Warp(warp::WarpArgs),
     /// Edge-blend masks for every channel of a rig (16-bit PNG, gamma-encoded).
@@ -122,6 +126,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Projections => projections::run(),
         Command::Tiles(c) => tiles::run(c),
         Command::Lens(c) => lens::run(c),
+        Command::Rig(c) => rig::run(c),
         Command::Warp(a) => warp::run(a),
         Command::Blend(a) => blend::run(a),
         Command::Export(a) => export::run(a),

@@ -19,8 +19,17 @@ pub struct ServeArgs {
     bind: SocketAddr,
     /// Start with the built-in demo rig (270° cylinder, 3 projectors) when the data directory
     /// holds none.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "rig")]
     demo: bool,
+    /// Serve this rig file: imported into a data directory that holds no rig; one holding
+    /// another rig is refused unless --replace-rig. Its mesh screen is read from the data
+    /// directory's meshes/ or --assets, as any rig the daemon serves.
+    #[arg(long, value_name = "FILE")]
+    rig: Option<PathBuf>,
+    /// With --rig: make the file the data directory's next rig revision when it holds another
+    /// (the one before stays in the history, for undo).
+    #[arg(long, requires = "rig")]
+    replace_rig: bool,
     /// File holding the bearer token every request must carry (Authorization: Bearer …).
     #[arg(long)]
     token_file: Option<PathBuf>,
@@ -175,6 +184,14 @@ pub fn run(a: ServeArgs) -> Result<()> {
     } else {
         None
     };
+    let import = match &a.rig {
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("--rig {}", p.display()))?;
+            Some(RigDoc::parse(&text).with_context(|| format!("--rig {}", p.display()))?)
+        }
+        None => None,
+    };
     if let Some(d) = &a.data {
         warn_if_readable_by_others(d, "the data directory", "chmod 700");
     }
@@ -182,6 +199,8 @@ pub fn run(a: ServeArgs) -> Result<()> {
         a.data.clone(),
         OpenOptions {
             initial,
+            import,
+            replace: a.replace_rig,
             reset: a.reset,
             memory_budget: a.memory_budget,
             assets: a.assets.clone(),

@@ -8,8 +8,11 @@
 //! y down, z forward.
 
 mod blend;
+mod coverage;
 mod tiles;
 mod warp;
+
+pub use coverage::Coverage;
 
 pub use blend::{BlendOptions, apply_gains, blend_png_bytes, signal_gains, write_blend_png};
 pub use tiles::{SAMPLED_COLUMNS, default_rows};

@@ -53,7 +53,7 @@ pub struct Row {
     pub at_ms: i64,
     /// Who wrote it: the token's name when one is required, `local` otherwise.
     pub who: String,
-    /// create, migrate, put, patch, delete, apply, revert, undo or redo.
+    /// create, import, migrate, put, patch, delete, apply, revert, undo, redo, recover or reset.
     pub action: String,
     /// What the client sent when it is small (a PATCH's edits, a revert's revision).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -161,8 +161,13 @@ pub struct Store {
 /// How a store is opened.
 #[derive(Debug, Clone)]
 pub struct OpenOptions {
-    /// The rig to start from when the data directory holds none.
+    /// The rig to start from when the data directory holds none (`--demo`).
     pub initial: Option<RigDoc>,
+    /// A rig file to serve (`--rig`): imported into a data directory that holds none; one that
+    /// holds another rig is refused unless `replace`, which makes the file its next revision.
+    pub import: Option<RigDoc>,
+    /// See `import`.
+    pub replace: bool,
     /// Start from `initial` even when the data directory is damaged beyond recovery (the
     /// damaged database or files are kept beside as `<name>.damaged`).
     pub reset: bool,
@@ -178,6 +183,8 @@ impl Default for OpenOptions {
     fn default() -> Self {
         OpenOptions {
             initial: None,
+            import: None,
+            replace: false,
             reset: false,
             memory_budget: crate::limits::MEMORY_BUDGET,
             assets: None,
@@ -297,22 +304,46 @@ impl Store {
             meshes.accept(doc, o.memory_budget)
         })?;
         let (rig, revision) = match loaded {
-            Loaded::Found(found) => found,
+            Loaded::Found((rig, revision)) => match &o.import {
+                Some(doc) if json_of(doc) != json_of(&rig.doc) => {
+                    if !o.replace {
+                        return Err(crate::Error::invalid(
+                            "rig",
+                            format!(
+                                "the data directory already holds another rig (revision \
+                                 {revision}); give --replace-rig to make this file its revision \
+                                 {}, or start with another --data",
+                                revision + 1
+                            ),
+                        ));
+                    }
+                    let rig = meshes.accept(doc.clone(), o.memory_budget)?;
+                    let doc = json_of(&rig.doc);
+                    db.write("rig", None, (revision + 1, &doc), &by_daemon("import"))?;
+                    (rig, revision + 1)
+                }
+                _ => (rig, revision),
+            },
             Loaded::Damaged(reasons) if !o.reset => return Err(damaged("the rig", &reasons)),
             loaded => {
-                let doc = o.initial.clone().ok_or_else(|| {
+                let doc = o.import.clone().or_else(|| o.initial.clone());
+                let doc = doc.ok_or_else(|| {
                     crate::Error::invalid(
                         "data",
                         if matches!(loaded, Loaded::Missing) {
-                            "no rig in the data directory; start with --demo"
+                            "no rig in the data directory; start with --rig rig.json or --demo"
                         } else {
-                            "--reset needs a rig to start from: give --demo"
+                            "--reset needs a rig to start from: give --rig or --demo"
                         },
                     )
                 })?;
                 let rig = meshes.accept(doc, o.memory_budget)?;
                 let revision = db.current("rig")?.map_or(1, |(r, _)| r + 1);
-                let action = if revision == 1 { "create" } else { "reset" };
+                let action = match (revision, o.import.is_some()) {
+                    (_, true) => "import",
+                    (1, false) => "create",
+                    _ => "reset",
+                };
                 db.write(
                     "rig",
                     None,
