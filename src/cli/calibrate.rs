@@ -44,7 +44,8 @@ pub struct CalibrateArgs {
     /// The channel of --rig that --pose-captures show.
     #[arg(long, requires = "pose_captures")]
     pose_channel: Option<String>,
-    /// The rig whose wall the camera looks at.
+    /// The rig whose wall the camera looks at; with --update, the rig the projector is
+    /// written into.
     #[arg(long)]
     rig: Option<PathBuf>,
     /// The projector's channel in --rig: its resolution, and the calibration --check compares
@@ -78,8 +79,12 @@ pub struct CalibrateArgs {
     id: String,
     /// The projector as a rig channel (JSON). With --check: the channel re-fitted from the
     /// same captures, written whatever the verdict.
-    #[arg(long, required_unless_present = "check")]
+    #[arg(long, required_unless_present_any = ["check", "update"])]
     out: Option<PathBuf>,
+    /// Instead of --out: put the calibrated projector into --rig as its channel --channel (the
+    /// file rewritten atomically, every other field kept), and print how it moved.
+    #[arg(long, requires_all = ["rig", "channel"], conflicts_with_all = ["out", "check"])]
+    update: bool,
 }
 
 pub fn run(a: CalibrateArgs) -> Result<()> {
@@ -115,12 +120,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     let cal = calibrate(&problem, choice)
         .map_err(|e| anyhow::anyhow!("--correspondences: {}", named(e)))?;
     report(&cal, problem.points.len());
-    write_channel(
-        &cal,
-        &a.id,
-        resolution,
-        a.out.as_ref().expect("clap requires it"),
-    )
+    place(&a, &cal, resolution)
 }
 
 fn report(cal: &omniwarp::calibration::Calibration, points: usize) {
@@ -155,6 +155,68 @@ fn write_channel(
     out: &std::path::Path,
 ) -> Result<()> {
     write_json(out, &cal.channel_doc(id, resolution))
+}
+
+/// The calibrated projector written where it was asked for: into --rig as channel --channel
+/// (`--update`), or as a channel document at --out (named --id, or --channel with --captures).
+fn place(
+    a: &CalibrateArgs,
+    cal: &omniwarp::calibration::Calibration,
+    resolution: [u32; 2],
+) -> Result<()> {
+    let id = a.channel.as_deref().unwrap_or(&a.id);
+    if !a.update {
+        return write_channel(
+            cal,
+            id,
+            resolution,
+            a.out.as_ref().expect("clap requires it"),
+        );
+    }
+    let path = a.rig.as_ref().expect("clap requires it");
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("--rig {}", path.display()))?;
+    let mut doc = omniwarp::rig::RigDoc::parse(&text)
+        .map_err(|e| anyhow::anyhow!("--rig {}: {}", path.display(), named(e)))?;
+    let Some(slot) = doc.channels.iter_mut().find(|c| c.id == id) else {
+        let ids: Vec<_> = doc.channels.iter().map(|c| c.id.as_str()).collect();
+        anyhow::bail!(
+            "--channel: no channel `{id}` in --rig; it has {}",
+            ids.join(", ")
+        );
+    };
+    let before = omniwarp::rig::Channel::from_doc(slot, "before")
+        .map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
+    *slot = cal.channel_doc(id, resolution);
+    let after = omniwarp::rig::Channel::from_doc(slot, "after")
+        .map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
+    // Validated whole, its mesh read beside it, before the file is touched.
+    let base = path.parent().unwrap_or(std::path::Path::new("."));
+    let mut check = doc.clone();
+    check.screen.load(base, "/screen")?;
+    omniwarp::rig::Rig::from_doc(check).map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
+    write_json(path, &doc)?;
+    let forward = |c: &omniwarp::rig::Channel| c.rotation * glam::DVec3::Z;
+    let focal = |c: &omniwarp::rig::Channel| c.lens.intrinsics()[0];
+    let turned = forward(&before).angle_between(forward(&after)).to_degrees();
+    eprintln!(
+        "{}: channel {id} updated: moved {:.3} m, turned {turned:.2}°, {} f {:.1} px → {} f {:.1} px",
+        path.display(),
+        (after.position - before.position).length(),
+        before.lens.model(),
+        focal(&before),
+        after.lens.model(),
+        focal(&after)
+    );
+    // A first calibration of a planned rig moves projectors; one that turns a projector round
+    // is more likely another projector's points.
+    if turned > 30.0 {
+        eprintln!(
+            "warning: channel {id} now looks {turned:.0}° away from where the rig had it; if \
+             these were another projector's points, put the file back from your copy"
+        );
+    }
+    Ok(())
 }
 
 /// `--captures`: decode, then calibrate or check.
@@ -277,12 +339,7 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
         found.decoded.rejected
     );
     report(&found.calibration, found.problem.points.len());
-    write_channel(
-        &found.calibration,
-        id,
-        resolution,
-        a.out.as_ref().expect("clap requires it"),
-    )
+    place(a, &found.calibration, resolution)
 }
 
 /// `--pose-captures`: the camera posed from another projector's captures.

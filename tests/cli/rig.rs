@@ -282,3 +282,81 @@ fn serve_starts_on_ones_own_rig_and_keeps_another_only_when_told() {
     ]);
     assert!(!ok && err.contains("--rig"), "{err}");
 }
+
+/// `calibrate --update` puts the calibrated projector into the rig file as the named channel:
+/// the same channel `--out` would write, every other channel untouched, how it moved printed;
+/// a channel the rig lacks is refused and the file left as it was.
+#[test]
+fn calibrate_writes_the_projector_into_the_rig() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let points = format!("{root}/calibration/examples/points.json");
+    let dir = tempfile::tempdir().unwrap();
+    let rig = dir.path().join("rig.json");
+    std::fs::copy(
+        format!("{root}/calibration/rigs/cylinder-270-3proj.json"),
+        &rig,
+    )
+    .unwrap();
+    let rig_arg = rig.to_str().unwrap();
+    let before: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rig).unwrap()).unwrap();
+    let alone = dir.path().join("alone.json");
+    let base = [
+        "calibrate",
+        "--correspondences",
+        &points,
+        "--model",
+        "LENSMODEL_OPENCV4",
+    ];
+    let mut to_file = base.to_vec();
+    to_file.extend(["--channel", "centre", "--out", alone.to_str().unwrap()]);
+    assert!(omniwarp(&to_file).0);
+    let mut update = base.to_vec();
+    update.extend(["--rig", rig_arg, "--channel", "centre", "--update"]);
+    let (ok, _, err) = omniwarp(&update);
+    assert!(ok, "{err}");
+    assert!(err.contains("channel centre updated: moved"), "{err}");
+    // The example points are not the centre projector's: it is turned round, and told so.
+    assert!(err.contains("warning: channel centre now looks"), "{err}");
+    let after: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rig).unwrap()).unwrap();
+    let alone: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&alone).unwrap()).unwrap();
+    assert_eq!(after["channels"][1], alone);
+    for k in [0, 2] {
+        let (a, b) = (&before["channels"][k], &after["channels"][k]);
+        let same =
+            omniwarp::rig::Channel::from_doc(&serde_json::from_value(a.clone()).unwrap(), "a")
+                .unwrap()
+                .doc()
+                == omniwarp::rig::Channel::from_doc(
+                    &serde_json::from_value(b.clone()).unwrap(),
+                    "b",
+                )
+                .unwrap()
+                .doc();
+        assert!(same, "channel {k} changed");
+    }
+    assert_eq!(
+        after["screen"],
+        serde_json::to_value(
+            omniwarp::rig::RigDoc::parse(&before.to_string())
+                .unwrap()
+                .screen
+        )
+        .unwrap()
+    );
+    let kept = std::fs::read(&rig).unwrap();
+    let mut wrong = base.to_vec();
+    wrong.extend(["--rig", rig_arg, "--channel", "nope", "--update"]);
+    let (ok, _, err) = omniwarp(&wrong);
+    assert!(
+        !ok && err.contains("--channel") && err.contains("centre"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(&rig).unwrap(),
+        kept,
+        "a refused update changed the file"
+    );
+}
