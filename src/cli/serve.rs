@@ -132,15 +132,18 @@ fn tls_identity(a: &ServeArgs) -> Result<omniwarp::server::tls::Tls> {
         return Tls::from_pem(cert, key).map_err(|e| anyhow::anyhow!("--tls-cert/--tls-key: {e}"));
     }
     let mut names: Vec<String> = ["localhost", "127.0.0.1", "::1"].map(String::from).into();
-    if !a.bind.ip().is_unspecified() {
-        names.push(a.bind.ip().to_string());
+    let bound = (!a.bind.ip().is_unspecified()).then(|| a.bind.ip().to_string());
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").ok();
+    for name in bound
+        .into_iter()
+        .chain(host)
+        .chain(a.allow_hosts.iter().cloned())
+    {
+        let name = name.trim().to_string();
+        if !name.is_empty() && !names.contains(&name) {
+            names.push(name);
+        }
     }
-    if let Ok(host) = std::fs::read_to_string("/proc/sys/kernel/hostname") {
-        names.push(host.trim().to_string());
-    }
-    names.extend(a.allow_hosts.iter().cloned());
-    names.retain(|n| !n.is_empty());
-    names.dedup();
     if a.data.is_none() {
         tracing::warn!("no --data: the self-signed certificate lasts this run only");
     }

@@ -33,12 +33,7 @@ impl Mesh {
     /// A mesh of the given triangles (vertices in metres), its tree built; refused when empty or
     /// when a vertex is not finite.
     pub fn new(tris: Vec<[DVec3; 3]>) -> Result<Self> {
-        if tris.is_empty() {
-            return Err(Error::invalid("mesh", "has no triangles"));
-        }
-        if tris.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(Error::invalid("mesh", "has a non-finite vertex"));
-        }
+        Mesh::check(&tris)?;
         let digest = {
             use std::hash::{Hash, Hasher};
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -58,6 +53,18 @@ impl Mesh {
         Ok(m)
     }
 
+    /// What [`Mesh::new`] refuses, without building anything: no triangles, or a vertex that is
+    /// not finite.
+    pub fn check(tris: &[[DVec3; 3]]) -> Result<()> {
+        if tris.is_empty() {
+            return Err(Error::invalid("mesh", "has no triangles"));
+        }
+        if tris.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(Error::invalid("mesh", "has a non-finite vertex"));
+        }
+        Ok(())
+    }
+
     /// An OBJ file as a mesh (see [`read_obj_triangles`]).
     pub fn read_obj(path: &Path) -> Result<Self> {
         Mesh::read_obj_within(path, u64::MAX)
@@ -69,14 +76,14 @@ impl Mesh {
     /// vertices takes far more memory than its file.
     pub fn read_obj_within(path: &Path, budget: u64) -> Result<Self> {
         let text = read_obj_text(path)?;
-        let need = memory_of(count_obj_triangles(&text));
+        let triangles = count_obj_triangles(&text);
+        let need = memory_of(triangles);
         if need > budget {
             return Err(Error::file(
                 path,
                 format!(
-                    "its {} triangles need {} MiB to read and index, above the {} MiB the memory \
-                     budget leaves after the channels' warps",
-                    count_obj_triangles(&text),
+                    "its {triangles} triangles need {} MiB to read and index, above the {} MiB \
+                     the memory budget leaves after the channels' warps",
                     need >> 20,
                     budget >> 20
                 ),

@@ -588,27 +588,23 @@ async fn the_history_keeps_what_the_retention_allows() {
     let (st, _, _) = call(&s, get("/v1/channels/left/tiles?revision=54")).await;
     assert_eq!(st, StatusCode::NOT_FOUND);
     // Undo walks back to 55, then finds the rest dropped.
-    let mut current = 65;
-    for _ in 55..65 {
-        let undo = write(
+    let undo = |at: u64| {
+        write(
             "POST",
             "/v1/channels/left/tiles/undo",
-            Some(current),
+            Some(at),
             String::new(),
-        );
-        let (st, _, body) = call(&s, undo).await;
+        )
+    };
+    let mut current = 65;
+    for _ in 55..65 {
+        let (st, _, body) = call(&s, undo(current)).await;
         assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
         current += 1;
     }
     let (_, _, b) = call(&s, get("/v1/channels/left/tiles")).await;
     assert_eq!(at(&b), Some(theta(54)));
-    let undo = write(
-        "POST",
-        "/v1/channels/left/tiles/undo",
-        Some(current),
-        String::new(),
-    );
-    let (st, _, body) = call(&s, undo).await;
+    let (st, _, body) = call(&s, undo(current)).await;
     assert_eq!(st, StatusCode::CONFLICT);
     assert!(
         json(&body)["error"]

@@ -346,18 +346,12 @@ pub async fn patch_tiles(
         .map(|v| v["edits"].clone());
     let (id2, edits, state) = (id.clone(), patch.edits, s.clone());
     let mut screen = run_write(&s, move |cancel| {
-        let after = apply_edits(&rig, &id2, start.clone(), edits.clone(), cancel)?;
-        if current > wanted {
-            merges(
-                &state,
-                &rig,
-                &id2,
-                (wanted, current),
-                &edits,
-                (start, &after),
-                cancel,
-            )?;
+        if current == wanted {
+            return apply_edits(&rig, &id2, start, edits, cancel);
         }
+        let after = apply_edits(&rig, &id2, start.clone(), edits.clone(), cancel)?;
+        let merging = (wanted, current);
+        merges(&state, &rig, &id2, merging, &edits, (start, &after), cancel)?;
         Ok(after)
     })
     .await?;

@@ -68,7 +68,9 @@ pub async fn put(
             field: "body".into(),
             reason: e.reason(),
         })?;
-        Mesh::new(triangles).map_err(|e| ApiError::Invalid {
+        // Checked as a screen would take it; its tree is built when a rig names it, within the
+        // memory budget, not for every upload.
+        Mesh::check(&triangles).map_err(|e| ApiError::Invalid {
             field: "body".into(),
             reason: e.reason(),
         })?;

@@ -29,19 +29,19 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, RwLock};
 
-/// One channel's state as two views of it: writers take turns on `writer` (a write holds it
-/// from its revision check to its commit, which may be seconds of resampling), while readers
-/// take the last committed state from `seen` and never wait on a write in progress.
+/// One channel's state: the last committed, which readers take and never wait for, and a lock
+/// writers take turns on (a write holds it from its revision check to its commit, which may be
+/// seconds of resampling). Only a writer holding the lock replaces the state.
 pub struct Channel {
-    writer: Arc<tokio::sync::Mutex<ChannelData>>,
+    writer: Arc<tokio::sync::Mutex<()>>,
     seen: RwLock<Arc<ChannelData>>,
 }
 
 impl Channel {
     fn new(data: ChannelData) -> Channel {
         Channel {
-            seen: RwLock::new(Arc::new(data.clone())),
-            writer: Arc::new(tokio::sync::Mutex::new(data)),
+            seen: RwLock::new(Arc::new(data)),
+            writer: Arc::new(tokio::sync::Mutex::new(())),
         }
     }
 
@@ -52,8 +52,10 @@ impl Channel {
 
     /// The channel for writing, once the writers before have finished.
     pub async fn write(self: &Arc<Self>) -> ChannelWriter {
+        let held = self.writer.clone().lock_owned().await;
         ChannelWriter {
-            held: self.writer.clone().lock_owned().await,
+            now: self.read(),
+            _held: held,
             channel: self.clone(),
         }
     }
@@ -61,7 +63,8 @@ impl Channel {
 
 /// A writer's hold on a channel (see [`Channel::write`]); reads as the current state.
 pub struct ChannelWriter {
-    held: tokio::sync::OwnedMutexGuard<ChannelData>,
+    now: Arc<ChannelData>,
+    _held: tokio::sync::OwnedMutexGuard<()>,
     channel: Arc<Channel>,
 }
 
@@ -69,15 +72,15 @@ impl ChannelWriter {
     /// Makes `next` the channel's state, for the next writer and for readers; call once it is
     /// durable.
     pub fn set(&mut self, next: ChannelData) {
-        *self.channel.seen.write().expect("no reader panics") = Arc::new(next.clone());
-        *self.held = next;
+        self.now = Arc::new(next);
+        *self.channel.seen.write().expect("no reader panics") = self.now.clone();
     }
 }
 
 impl std::ops::Deref for ChannelWriter {
     type Target = ChannelData;
     fn deref(&self) -> &ChannelData {
-        &self.held
+        &self.now
     }
 }
 
