@@ -52,7 +52,40 @@ class App {
   tab(name) {
     for (const t of document.querySelectorAll('[data-tab]')) t.classList.toggle('active', t.dataset.tab === name);
     for (const p of document.querySelectorAll('.panel')) p.hidden = p.id !== `panel-${name}`;
-    if (name === 'overview') this.rig.draw();
+    if (name === 'overview') {
+      this.rig.draw();
+      this.loadPlan();
+    }
+  }
+
+  // The plan of the rig as it is now: fetched when the overview is shown, again only when the
+  // rig has changed since.
+  async loadPlan() {
+    const revision = this.rigRevision;
+    if (this.planRevision === revision) return;
+    this.planRevision = revision;
+    try {
+      const [{ body }, { blob }] = await Promise.all([
+        this.api.get('/v1/rig/plan?step=1'),
+        this.api.blob('/v1/rig/plan.png?step=1&width=900'),
+      ]);
+      if (revision !== this.rigRevision) return;
+      const [none, one, two, more] = body.wall.lit_by.map((s) => (100 * s).toFixed(1));
+      const density = body.wall.pixels_per_degree;
+      const narrowest = Math.min(...body.overlaps.map((o) => o.width));
+      $('#plan-summary').textContent =
+        `Wall lit by no projector ${none} %, one ${one} %, two ${two} %, three or more ${more} %. ` +
+        (density ? `Pixels per degree ${density[0].toFixed(1)} to ${density[2].toFixed(1)}, median ${density[1].toFixed(1)}. ` : '') +
+        (body.overlaps.length ? `Narrowest overlap ${narrowest.toFixed(1)}°.` : 'No overlaps.');
+      const img = $('#plan');
+      const old = img.src;
+      img.src = URL.createObjectURL(blob);
+      img.dataset.revision = String(revision);
+      if (old.startsWith('blob:')) URL.revokeObjectURL(old);
+    } catch (e) {
+      this.planRevision = undefined;
+      $('#plan-summary').textContent = `The plan could not be loaded: ${this.describe(e)}`;
+    }
   }
 
   describe(e) {
@@ -118,6 +151,7 @@ class App {
     const geometry = await this.api.get('/v1/rig/geometry');
     this.rig.selected = this.channel;
     this.rig.set(geometry.body);
+    if (!$('#panel-overview').hidden) this.loadPlan();
     await Promise.all([this.select(this.channel), this.historyPanel.load()]);
   }
 

@@ -36,6 +36,8 @@ export class ContentPanel {
       e.preventDefault();
       this.save();
     });
+    $('#content-show').addEventListener('click', () => this.saveShow());
+    $('#content-inherit').addEventListener('click', () => this.inherit());
     $('#content-undo').addEventListener('click', () => this.history('undo'));
     $('#content-redo').addEventListener('click', () => this.history('redo'));
     $('#centre-clear').addEventListener('click', () => {
@@ -229,6 +231,9 @@ export class ContentPanel {
     if (id !== this.id) return;
     this.revision = revision;
     this.canvas = body.content;
+    this.own = body.own;
+    $('#content-source').textContent = body.own ? "(this channel's own canvas)" : "(the show's canvas)";
+    $('#content-inherit').hidden = !body.own;
     const c = body.content;
     const f = this.form.elements;
     f.projection.value = c.projection;
@@ -294,6 +299,32 @@ export class ContentPanel {
       } else {
         this.app.notify(this.app.describe(e), 'error');
       }
+    }
+  }
+
+  // The show's canvas is the rig's `canvas`: a rig edit, which recomputes no warp.
+  async saveShow(body = this.body()) {
+    if (!this.loaded()) return;
+    try {
+      const { body: rig, revision } = await this.app.api.get('/v1/rig');
+      const doc = rig.rig;
+      doc.canvas = body;
+      const r = await this.app.api.write('PUT', '/v1/rig', doc, revision);
+      this.app.notify(`the show's canvas, rig revision ${r.revision}`);
+      await this.load(this.id);
+    } catch (e) {
+      this.app.notify(this.app.describe(e), 'error');
+    }
+  }
+
+  async inherit(id = this.id) {
+    if (!this.loaded()) return;
+    try {
+      const r = await this.app.api.write('DELETE', `/v1/channels/${id}/content`, undefined, this.revision);
+      this.app.notify(`${id} plays the show's canvas (content revision ${r.revision})`);
+      if (id === this.id) await Promise.all([this.load(id), this.app.view.changed('content', r.revision)]);
+    } catch (e) {
+      this.app.notify(this.app.describe(e), 'error');
     }
   }
 

@@ -19,6 +19,11 @@ pub const MEMORY_BUDGET: u64 = 2 << 30;
 pub const SPLINE_KNOTS_SIDE: u32 = 200;
 /// Knots of a splined lens model in all (columns × rows).
 pub const SPLINE_KNOTS: u64 = 10_000;
+/// The finest grid a rig's plan samples the wall on, degrees (`step`; 0.25° is about a
+/// million samples), and the coarsest.
+pub const PLAN_STEP: [f64; 2] = [0.25, 5.0];
+/// Width of a plan's picture in pixels, at least and at most (`width`, `--picture-width`).
+pub const PLAN_PICTURE_WIDTH: [usize; 2] = [320, 4096];
 /// Features of a tile grid each way, and in all; triangles of a triangle soup.
 pub const TILE_SIDE: usize = 1025;
 /// Features of a tile grid in all (columns × rows).

@@ -398,10 +398,10 @@ impl Calibration {
         crate::rig::ChannelDoc {
             id: id.to_string(),
             resolution,
-            lens: crate::rig::LensDoc {
-                model: self.fit.lens.model().to_string(),
-                intrinsics: self.fit.lens.intrinsics().to_vec(),
-            },
+            lens: crate::rig::LensDoc::new(
+                self.fit.lens.model().to_string(),
+                self.fit.lens.intrinsics().to_vec(),
+            ),
             pose: crate::rig::PoseDoc {
                 position: position.to_array(),
                 look_to: None,

@@ -39,10 +39,11 @@ pub struct ExportArgs {
     /// millimetres (mpcdi-a3).
     #[arg(long)]
     tolerance: Option<f64>,
-    /// The content canvas (for stmap and remap): its projection and view, as for `render`.
+    /// The content canvas (for the 2d formats): its projection and view, as for `render`;
+    /// without --projection, the rig's `canvas` when it has one.
     #[command(flatten)]
     canvas: ProjectionArgs,
-    /// Content image size WxH in pixels (stmap and remap).
+    /// Content image size WxH in pixels (the 2d formats); the rig canvas's by default.
     #[arg(long, value_parser = parse_size)]
     content_size: Option<(u32, u32)>,
     /// Output file.
@@ -79,8 +80,31 @@ pub fn run(a: ExportArgs) -> Result<()> {
     // The command line waits for its export; nothing cancels it.
     let never = std::sync::atomic::AtomicBool::new(false);
     let rig = read_rig(&a.rig)?;
-    let centre = a
-        .project_from
+    // Without --projection the 2d exports point into the rig's own canvas, when it has one:
+    // its view, its size and its projection centre, each unless a flag says otherwise.
+    let rig_canvas = match (&a.canvas.projection, &rig.doc.canvas) {
+        (None, Some(c)) => Some(c.clone()),
+        _ => None,
+    };
+    let content_size = a
+        .content_size
+        .or(rig_canvas.as_ref().map(|c| (c.size[0], c.size[1])));
+    let project_from = a.project_from.or(rig_canvas
+        .as_ref()
+        .and_then(|c| c.project_from)
+        .map(glam::DVec3::from_array));
+    let view = |w: u32, h: u32| -> Result<omniwarp::projection::View> {
+        match &rig_canvas {
+            Some(c) => {
+                let mut c = c.clone();
+                c.size = [w, h];
+                c.view()
+                    .map_err(|e| anyhow::anyhow!("the rig's canvas: {}", super::args::named(e)))
+            }
+            None => a.canvas.view(w, h),
+        }
+    };
+    let centre = project_from
         .map(|c| rig.check_centre(c, "project-from"))
         .transpose()
         .map_err(super::args::flag_error)?;
@@ -94,10 +118,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
         }
         warp
     };
-    let size = || {
-        a.content_size
-            .context("--content-size: needed for this format")
-    };
+    let size = || content_size.context("--content-size: needed for this format");
     let tolerance = |default: f64| {
         Tolerance::checked(a.tolerance.unwrap_or(default), "tolerance")
             .map_err(|e| anyhow::anyhow!("--tolerance: {}", e.reason()))
@@ -114,10 +135,10 @@ pub fn run(a: ExportArgs) -> Result<()> {
         };
         let (cw, chh) = match profile {
             mpcdi::Profile::TwoD => size()?,
-            mpcdi::Profile::A3 => a.content_size.unwrap_or((1, 1)),
+            mpcdi::Profile::A3 => content_size.unwrap_or((1, 1)),
         };
         let canvas = match profile {
-            mpcdi::Profile::TwoD => Some(a.canvas.view(cw, chh)?),
+            mpcdi::Profile::TwoD => Some(view(cw, chh)?),
             mpcdi::Profile::A3 => None,
         };
         let reader = match &a.reader {
@@ -177,11 +198,10 @@ pub fn run(a: ExportArgs) -> Result<()> {
     let warp = warp_of(ch);
     let canvas_uv = |size: Option<(u32, u32)>| -> Result<Vec<Option<[f64; 2]>>> {
         let (cw, chh) = size.context("--content-size: needed for this format")?;
-        let canvas = a.canvas.view(cw, chh)?;
-        Ok(export::content_uv(&warp.map, &canvas))
+        Ok(export::content_uv(&warp.map, &view(cw, chh)?))
     };
     match a.format {
-        ExportFormat::Stmap => export::write_stmap(&a.out, &canvas_uv(a.content_size)?, w, h)?,
+        ExportFormat::Stmap => export::write_stmap(&a.out, &canvas_uv(content_size)?, w, h)?,
         ExportFormat::PfmA3 => export::write_pfm(&a.out, w, h, &export::a3_samples(&warp.points))?,
         ExportFormat::Remap => {
             let ymap = a
@@ -189,11 +209,11 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 .as_ref()
                 .context("--ymap: remap needs a second file for the rows")?;
             let (cw, chh) = size()?;
-            export::write_remap_pgm(&a.out, ymap, &canvas_uv(a.content_size)?, w, h, [cw, chh])?;
+            export::write_remap_pgm(&a.out, ymap, &canvas_uv(content_size)?, w, h, [cw, chh])?;
         }
         ExportFormat::Pfm2d | ExportFormat::Mesh => {
             let (cw, chh) = size()?;
-            let uv = export::content_uv_unbounded(&warp.map, &a.canvas.view(cw, chh)?);
+            let uv = export::content_uv_unbounded(&warp.map, &view(cw, chh)?);
             let weights = rig.blend_weights(ch, &warp.points);
             let src = Sources {
                 id: &ch.id,

@@ -218,9 +218,20 @@ fn ids(w: usize, h: usize, label: &Label) -> Raster<[u8; 4]> {
     img
 }
 
-/// Writes `s` centred on (cx, cy) in the 8×8 font, each font pixel `size` pixels wide; letters
-/// outside the font's ASCII range are drawn as '?'.
 fn text(img: &mut Raster<[u8; 4]>, s: &str, cx: usize, cy: usize, size: usize) {
+    text_in(img, s, cx, cy, size, WHITE);
+}
+
+/// Writes `s` centred on (cx, cy) in `colour` in the 8×8 font, each font pixel `size` pixels
+/// wide; letters outside the font's ASCII range are drawn as '?'.
+pub(crate) fn text_in(
+    img: &mut Raster<[u8; 4]>,
+    s: &str,
+    cx: usize,
+    cy: usize,
+    size: usize,
+    colour: [u8; 4],
+) {
     let n = s.chars().count();
     let x0 = cx as i64 - (n * 8 * size) as i64 / 2;
     let y0 = cy as i64 - (4 * size) as i64;
@@ -243,7 +254,7 @@ fn text(img: &mut Raster<[u8; 4]>, s: &str, cx: usize, cy: usize, size: usize) {
                         if x >= 0 && y >= 0 && (x as usize) < img.width && (y as usize) < img.height
                         {
                             let w = img.width;
-                            img.data[y as usize * w + x as usize] = WHITE;
+                            img.data[y as usize * w + x as usize] = colour;
                         }
                     }
                 }

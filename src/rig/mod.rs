@@ -8,11 +8,15 @@
 //! y down, z forward.
 
 mod blend;
+mod canvas;
 mod coverage;
+pub mod plan;
 mod tiles;
 mod warp;
 
+pub use canvas::Canvas;
 pub use coverage::Coverage;
+pub use plan::{ChannelPlan, Overlap, Plan, PointPlan, WallPlan};
 
 pub use blend::{BlendOptions, apply_gains, blend_png_bytes, signal_gains, write_blend_png};
 pub use tiles::{SAMPLED_COLUMNS, default_rows};
@@ -46,6 +50,10 @@ pub struct RigDoc {
     /// The projectors, one channel each; at least one, at most
     /// [`crate::limits::CHANNELS`], with distinct ids.
     pub channels: Vec<ChannelDoc>,
+    /// The show's content canvas, which every channel plays unless it has its own; left out,
+    /// the whole sphere as a 4096×2048 equirect ([`Canvas::default`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canvas: Option<Canvas>,
 }
 
 impl RigDoc {
@@ -118,14 +126,93 @@ pub struct ChannelDoc {
 }
 
 /// A lens as the rig file writes it (a channel's `lens`); docs/lens-models.md has the models.
+/// A planned projector may give its throw ratio and lens shift instead of intrinsics; the rig
+/// holds them as the pinhole intrinsics they amount to.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LensDoc {
-    /// mrcal's model name, e.g. `LENSMODEL_OPENCV5`.
+    /// mrcal's model name, e.g. `LENSMODEL_OPENCV5`; `LENSMODEL_PINHOLE` when left out.
+    #[serde(default = "pinhole")]
     pub model: String,
     /// The model's intrinsics in mrcal's (and OpenCV's) order: fx, fy, cx, cy in pixels, then
     /// the distortion parameters; (cx, cy) counts from the centre of the top-left pixel.
+    /// Left out when `throw_ratio` is given.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub intrinsics: Vec<f64>,
+    /// Throw distance over image width, as projector data sheets give it (0.1–20): the
+    /// pinhole's fx = fy = throw ratio × width in pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub throw_ratio: Option<f64>,
+    /// Lens shift `[horizontal, vertical]` as fractions of the image's width and height, with
+    /// `throw_ratio` only (−2 to 2 each; `[0, 0]` when left out): +0.5 vertical puts the
+    /// optical axis on the image's bottom edge (the image raised half its height), +0.5
+    /// horizontal moves the image half its width to the right.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shift: Option<[f64; 2]>,
+}
+
+fn pinhole() -> String {
+    "LENSMODEL_PINHOLE".into()
+}
+
+impl LensDoc {
+    /// A lens of `model` with `intrinsics`.
+    pub fn new(model: impl Into<String>, intrinsics: Vec<f64>) -> LensDoc {
+        LensDoc {
+            model: model.into(),
+            intrinsics,
+            throw_ratio: None,
+            shift: None,
+        }
+    }
+
+    /// The lens of a `width` × `height` projector as its model and intrinsics, from its
+    /// throw ratio and shift when given; errors name the field under `prefix`.
+    pub fn intrinsics_for(&self, width: u32, height: u32, prefix: &str) -> Result<Vec<f64>> {
+        let at = |f: &str| format!("{prefix}/{f}");
+        let Some(throw) = self.throw_ratio else {
+            if self.shift.is_some() {
+                return Err(Error::invalid(
+                    at("shift"),
+                    "is given with throw_ratio only",
+                ));
+            }
+            return Ok(self.intrinsics.clone());
+        };
+        if !self.intrinsics.is_empty() {
+            return Err(Error::invalid(
+                at("throw_ratio"),
+                "give either intrinsics or throw_ratio, not both",
+            ));
+        }
+        if self.model != "LENSMODEL_PINHOLE" {
+            return Err(Error::invalid(
+                at("model"),
+                "a throw ratio describes a pinhole lens: LENSMODEL_PINHOLE or left out",
+            ));
+        }
+        if !(0.1..=20.0).contains(&throw) {
+            return Err(Error::invalid(
+                at("throw_ratio"),
+                format!("must be 0.1 to 20, got {throw}"),
+            ));
+        }
+        let [sx, sy] = self.shift.unwrap_or([0.0; 2]);
+        if !(sx.abs() <= 2.0 && sy.abs() <= 2.0) {
+            return Err(Error::invalid(
+                at("shift"),
+                "each part must be −2 to 2 (fractions of the image's width and height)",
+            ));
+        }
+        let (w, h) = (f64::from(width), f64::from(height));
+        let f = throw * w;
+        Ok(vec![
+            f,
+            f,
+            (w - 1.0) / 2.0 - sx * w,
+            (h - 1.0) / 2.0 + sy * h,
+        ])
+    }
 }
 
 /// A projector's pose as the rig file writes it: the projector-to-world transform, given by
@@ -174,10 +261,10 @@ impl Channel {
         ChannelDoc {
             id: self.id.clone(),
             resolution: [self.width, self.height],
-            lens: LensDoc {
-                model: self.lens.model().to_string(),
-                intrinsics: self.lens.intrinsics().to_vec(),
-            },
+            lens: LensDoc::new(
+                self.lens.model().to_string(),
+                self.lens.intrinsics().to_vec(),
+            ),
             pose: PoseDoc {
                 position: self.position.to_array(),
                 look_to: None,
@@ -205,7 +292,8 @@ impl Channel {
             .model
             .parse()
             .map_err(|e: Error| Error::invalid(at("lens/model"), e.reason()))?;
-        let lens = Lens::new(model, c.lens.intrinsics.clone())
+        let intrinsics = c.lens.intrinsics_for(w, h, &at("lens"))?;
+        let lens = Lens::new(model, intrinsics)
             .map_err(|e| Error::invalid(at("lens/intrinsics"), e.reason()))?;
         let position = vec3(&at("pose/position"), c.pose.position)?;
         let rotation = match (c.pose.look_to, c.pose.look_up, c.pose.rvec) {
@@ -349,13 +437,32 @@ impl Rig {
             }
             channels.push(Channel::from_doc(c, &format!("/channels/{n}"))?);
         }
-        Ok(Rig {
+        if let Some(canvas) = &doc.canvas {
+            canvas.view().map_err(|e| under("/canvas", e))?;
+        }
+        // A throw ratio is held as the intrinsics it amounts to, which every reader knows.
+        let mut doc = doc;
+        for (c, ch) in doc.channels.iter_mut().zip(&channels) {
+            if c.lens.throw_ratio.is_some() {
+                c.lens = LensDoc::new(c.lens.model.clone(), ch.lens.intrinsics().to_vec());
+            }
+        }
+        let rig = Rig {
             doc,
             eye,
             content,
             offaxis,
             channels,
-        })
+        };
+        if let Some(canvas) = &rig.doc.canvas {
+            canvas.centre(&rig).map_err(|e| under("/canvas", e))?;
+        }
+        Ok(rig)
+    }
+
+    /// The show's content canvas: the document's, or the whole sphere by default.
+    pub fn canvas(&self) -> Canvas {
+        self.doc.canvas.clone().unwrap_or_default()
     }
 
     /// What the warps of all channels hold in memory at once, bytes (see
@@ -444,6 +551,17 @@ impl Rig {
         }
         // The cloned document keeps the loaded mesh, if any.
         Rig::from_doc(doc)
+    }
+}
+
+/// An error of a part of the document, its field pointer put under `prefix`.
+fn under(prefix: &str, e: Error) -> Error {
+    match e {
+        Error::Invalid { name, reason } if name.starts_with('/') => {
+            Error::invalid(format!("{prefix}{name}"), reason)
+        }
+        Error::Invalid { name, reason } => Error::invalid(format!("{prefix}/{name}"), reason),
+        other => other,
     }
 }
 

@@ -13,13 +13,14 @@ pub mod tls;
 
 use http::guard;
 use routes::{
-    calib, captures, channels, console, exports, geometry, history, meshes, outputs, rig, show,
+    calib, captures, channels, console, exports, geometry, history, meshes, outputs, plan, rig,
+    show,
 };
 
+pub use crate::rig::Canvas;
 pub use http::error::ApiError;
 pub use http::guard::{BODY_TIMEOUT, MAX_HEADERS, MAX_URI};
 pub use http::state::{AppState, FEEDS, MAX_BODY, Options, STREAMS, WORKERS};
-pub use storage::canvas::Canvas;
 pub use storage::db::Retention;
 pub use storage::store::{ChannelData, OpenOptions, Store};
 
@@ -59,9 +60,13 @@ routes! {
     "/v1/rig/undo" => post(history::rig_undo);
     "/v1/rig/redo" => post(history::rig_redo);
     "/v1/rig/geometry" => get(geometry::geometry);
+    "/v1/rig/plan" => get(plan::plan);
+    "/v1/rig/plan.png" => get(plan::picture);
     "/v1/history" => get(history::list);
     "/v1/channels" => get(rig::channels);
-    "/v1/channels/{id}/content" => get(channels::get_content).put(channels::put_content);
+    "/v1/channels/{id}/content" => get(channels::get_content)
+        .put(channels::put_content)
+        .delete(channels::delete_content);
     "/v1/channels/{id}/content/revert" => post(history::content_revert);
     "/v1/channels/{id}/content/undo" => post(history::content_undo);
     "/v1/channels/{id}/content/redo" => post(history::content_redo);

@@ -534,9 +534,9 @@ pub fn fisheye_at_eye(rig: &Rig, projector: &Channel, w: u32, h: u32) -> Result<
     let doc = crate::rig::ChannelDoc {
         id: "camera".into(),
         resolution: [w, h],
-        lens: crate::rig::LensDoc {
-            model: "LENSMODEL_OPENCV_FISHEYE".into(),
-            intrinsics: vec![
+        lens: crate::rig::LensDoc::new(
+            "LENSMODEL_OPENCV_FISHEYE",
+            vec![
                 f,
                 f,
                 f64::from(w) / 2.0 - 0.5,
@@ -546,7 +546,7 @@ pub fn fisheye_at_eye(rig: &Rig, projector: &Channel, w: u32, h: u32) -> Result<
                 0.0,
                 0.0,
             ],
-        },
+        ),
         pose: crate::rig::PoseDoc {
             position: rig.eye.to_array(),
             look_to: Some(to.to_array()),

@@ -195,6 +195,81 @@ fn rig_check_prints_the_example_dome_and_names_a_bad_field() {
 }
 
 /// The channel ids and rig revision the daemon serves.
+#[test]
+fn rig_plan_prints_draws_and_sweeps() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = env!("CARGO_MANIFEST_DIR");
+    let rig = format!("{root}/calibration/rigs/dome-180-tilt15-5proj.json");
+    let picture = dir.path().join("plan.png");
+    let (ok, out, err) = omniwarp(&[
+        "rig",
+        "plan",
+        &rig,
+        "--step",
+        "1",
+        "--picture",
+        picture.to_str().unwrap(),
+        "--picture-width",
+        "600",
+    ]);
+    assert!(ok, "{err}");
+    // The example dome's side projectors lose a third of their pixels off the wall.
+    assert!(out.contains("lit by no projector"), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("front ") && l.contains("65.")),
+        "{out}"
+    );
+    assert!(out.contains("front + zenith"), "{out}");
+    let img = image::open(&picture).unwrap();
+    // A dome master of two thirds of the width above the scale and the two views.
+    assert_eq!(img.width(), 600);
+    assert!(img.height() > 400, "{}", img.height());
+    // Figures instead of a file, a sweep over one of them: a row per value.
+    let (ok, out, err) = omniwarp(&[
+        "rig",
+        "plan",
+        "--screen",
+        "cylinder",
+        "--projectors",
+        "3",
+        "--step",
+        "1",
+        "--sweep",
+        "overlap=5:25:10",
+    ]);
+    assert!(ok, "{err}");
+    let rows: Vec<&str> = out.lines().skip(1).collect();
+    assert_eq!(rows.len(), 3, "{out}");
+    // More overlap, more of the wall lit twice.
+    let twice = |row: &str| -> f64 {
+        row.split_whitespace()
+            .nth(3)
+            .unwrap()
+            .trim_end_matches('%')
+            .parse()
+            .unwrap()
+    };
+    assert!(
+        twice(rows[0]) < twice(rows[1]) && twice(rows[1]) < twice(rows[2]),
+        "{out}"
+    );
+    let (ok, out, err) = omniwarp(&[
+        "rig",
+        "plan",
+        "--screen",
+        "plane",
+        "--projectors",
+        "2",
+        "--step",
+        "1",
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let plan: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(plan["overlaps"][0]["across"], "longitude");
+}
+
 fn served(addr: std::net::SocketAddr) -> (Vec<String>, Option<u64>) {
     let mut c = omniwarp::server::client::Client::new(addr, None);
     let rig = c.get("/v1/rig").unwrap();
@@ -359,4 +434,75 @@ fn calibrate_writes_the_projector_into_the_rig() {
         kept,
         "a refused update changed the file"
     );
+}
+
+#[test]
+fn export_points_into_the_rigs_canvas_without_projection_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = env!("CARGO_MANIFEST_DIR");
+    let flat = format!("{root}/calibration/rigs/flat-2proj.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&flat).unwrap()).unwrap();
+    doc["canvas"] = serde_json::json!({"projection": "flat", "params": {"hfov": 100, "vfov": 40},
+        "size": [1920, 600]});
+    let rig = dir.path().join("rig.json");
+    std::fs::write(&rig, doc.to_string()).unwrap();
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (ok, _, err) = omniwarp(&[
+        "export",
+        "--rig",
+        rig.to_str().unwrap(),
+        "--channel",
+        "left",
+        "--format",
+        "stmap",
+        "--out",
+        &out("canvas.exr"),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = omniwarp(&[
+        "export",
+        "--rig",
+        &flat,
+        "--channel",
+        "left",
+        "--format",
+        "stmap",
+        "--projection",
+        "flat",
+        "--hfov",
+        "100",
+        "--vfov",
+        "40",
+        "--content-size",
+        "1920x600",
+        "--out",
+        &out("flags.exr"),
+    ]);
+    assert!(ok, "{err}");
+    let pixels = |name: &str| {
+        let (img, _) = omniwarp::image_io::read_exr_rgba(&dir.path().join(name)).unwrap();
+        img.data
+            .iter()
+            .flatten()
+            .map(|v| v.to_bits())
+            .collect::<Vec<u32>>()
+    };
+    assert!(
+        pixels("canvas.exr") == pixels("flags.exr"),
+        "the maps differ"
+    );
+    // Without flags or a canvas in the rig, the flag is asked for.
+    let (ok, _, err) = omniwarp(&[
+        "export",
+        "--rig",
+        &flat,
+        "--channel",
+        "left",
+        "--format",
+        "stmap",
+        "--out",
+        &out("none.exr"),
+    ]);
+    assert!(!ok && err.contains("--content-size"), "{err}");
 }

@@ -149,6 +149,11 @@ test('the console loads: channels, the rig in 3D, the feed live, a preview', asy
       return lit;
     });
     assert.ok(drawn > 500, `${drawn} pixels of the rig drawn`);
+    // The plan beneath it: the figures and the picture of the current rig revision.
+    await pageA.waitForSelector('#plan[data-revision]');
+    assert.match(await pageA.textContent('#plan-summary'), /lit by no projector .* overlap/);
+    const width = await pageA.evaluate(() => document.querySelector('#plan').naturalWidth);
+    assert.equal(width, 900);
     await pageA.click('[data-tab=channel]');
   });
 });
@@ -391,6 +396,39 @@ test('the content canvas from its pads: turned, O set, projected from a point', 
     // Azimuth 0, elevation +45°, O's default length 0.25.
     assert.ok(near(content.offaxis, [0, 0.177, -0.177], 0.01), `O ${content.offaxis}`);
     assert.ok(near(content.project_from, [0.5, 0, 0], 0.03), `from ${content.project_from}`);
+    await pageA.click('[data-tab=channel]');
+  });
+});
+
+test("one canvas for the show: saved for every channel, and a channel of its own given back", async () => {
+  await step('show canvas', async () => {
+    await pageA.click('[data-tab=content]');
+    await pageA.waitForFunction(() => /own canvas/.test(document.querySelector('#content-source').textContent));
+    await pageA.click('[data-tab=channel]');
+    await selectChannel(pageA, 'right');
+    await pageA.click('[data-tab=content]');
+    await pageA.waitForFunction(() => /show's canvas/.test(document.querySelector('#content-source').textContent));
+    assert.ok(await pageA.isHidden('#content-inherit'));
+    const rig = (await api('/v1/rig')).revision;
+    await pageA.fill('#content-form input[name=width]', '2048');
+    await pageA.fill('#content-form input[name=height]', '1024');
+    await pageA.click('#content-show');
+    await pageA.waitForFunction(() => /the show's canvas, rig revision/.test(document.querySelector('#notice').textContent));
+    assert.equal((await api('/v1/rig')).revision, rig + 1);
+    // Every channel without its own plays it; centre keeps its own.
+    const left = await api('/v1/channels/left/content');
+    assert.deepEqual([left.own, left.content.size], [false, [2048, 1024]]);
+    assert.equal((await api('/v1/channels/centre/content')).own, true);
+    // Right made its own, then given back to the show.
+    await pageA.fill('#content-form input[name=width]', '1024');
+    await pageA.fill('#content-form input[name=height]', '512');
+    await pageA.click('#content-form button[type=submit]');
+    await pageA.waitForFunction(() => /own canvas/.test(document.querySelector('#content-source').textContent));
+    assert.deepEqual((await api('/v1/channels/right/content')).content.size, [1024, 512]);
+    await pageA.click('#content-inherit');
+    await pageA.waitForFunction(() => /show's canvas/.test(document.querySelector('#content-source').textContent));
+    const right = await api('/v1/channels/right/content');
+    assert.deepEqual([right.own, right.content.size], [false, [2048, 1024]]);
     await pageA.click('[data-tab=channel]');
   });
 });

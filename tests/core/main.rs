@@ -14,6 +14,7 @@ mod interop;
 mod lens;
 mod normal_map;
 mod peer_ffmpeg;
+mod plan;
 mod projections;
 mod projective;
 mod rig;

@@ -23,9 +23,9 @@ fn fisheye(w: u32, h: u32) -> Channel {
     let doc = ChannelDoc {
         id: "camera".into(),
         resolution: [w, h],
-        lens: LensDoc {
-            model: "LENSMODEL_OPENCV_FISHEYE".into(),
-            intrinsics: vec![
+        lens: LensDoc::new(
+            "LENSMODEL_OPENCV_FISHEYE",
+            vec![
                 f,
                 f,
                 f64::from(w) / 2.0 - 0.5,
@@ -35,7 +35,7 @@ fn fisheye(w: u32, h: u32) -> Channel {
                 0.0,
                 0.0,
             ],
-        },
+        ),
         pose: PoseDoc {
             position: [0.0, 0.0, 0.0],
             look_to: Some([0.0, t.cos(), -t.sin()]),
@@ -51,10 +51,10 @@ fn pinhole(w: u32, h: u32, f: f64, look_to: [f64; 3]) -> Channel {
     let doc = ChannelDoc {
         id: "camera".into(),
         resolution: [w, h],
-        lens: LensDoc {
-            model: "LENSMODEL_PINHOLE".into(),
-            intrinsics: vec![f, f, f64::from(w) / 2.0 - 0.5, f64::from(h) / 2.0 - 0.5],
-        },
+        lens: LensDoc::new(
+            "LENSMODEL_PINHOLE",
+            vec![f, f, f64::from(w) / 2.0 - 0.5, f64::from(h) / 2.0 - 0.5],
+        ),
         pose: PoseDoc {
             position: [0.0, 0.0, 0.0],
             look_to: Some(look_to),

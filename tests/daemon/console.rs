@@ -255,3 +255,48 @@ async fn the_served_patterns_decode_to_each_projector_pixel() {
         }
     }
 }
+
+#[tokio::test]
+async fn the_plan_of_the_current_rig_is_served_as_figures_and_as_a_picture() {
+    let s = state(None, None);
+    let (st, h, body) = call(&s, get("/v1/rig/plan?step=1")).await;
+    assert_eq!(
+        (st, h[header::ETAG].to_str().unwrap()),
+        (StatusCode::OK, "\"1\"")
+    );
+    let p = json(&body);
+    assert_eq!(p["revision"], 1);
+    // The flat test rig: two projectors side by side on a 6 m × 2.5 m wall, overlapping.
+    let area = p["wall"]["area"].as_f64().unwrap();
+    assert!((area - 15.0).abs() < 0.3, "{area}");
+    let shares: f64 = (0..4)
+        .map(|k| p["wall"]["lit_by"][k].as_f64().unwrap())
+        .sum();
+    assert!((shares - 1.0).abs() < 1e-9);
+    assert_eq!(p["channels"].as_array().unwrap().len(), 2);
+    assert_eq!(
+        p["overlaps"][0]["channels"],
+        serde_json::json!(["left", "right"])
+    );
+    assert_eq!(p["overlaps"][0]["across"], "longitude");
+    let (st, h, png) = call(&s, get("/v1/rig/plan.png?step=2&width=400")).await;
+    assert_eq!(
+        (st, h[header::CONTENT_TYPE].to_str().unwrap()),
+        (StatusCode::OK, "image/png")
+    );
+    assert_eq!(image::load_from_memory(&png).unwrap().width(), 400);
+    for (uri, field) in [
+        ("/v1/rig/plan?step=0.01", "step"),
+        ("/v1/rig/plan?width=400", "width"),
+        ("/v1/rig/plan.png?width=99999", "width"),
+        ("/v1/rig/plan?colour=red", "colour"),
+    ] {
+        let (st, _, body) = call(&s, get(uri)).await;
+        assert_eq!(st, StatusCode::BAD_REQUEST, "{uri}");
+        let error = json(&body);
+        assert!(
+            error["field"] == field || error["error"].as_str().unwrap().contains(field),
+            "{uri}: {error}"
+        );
+    }
+}

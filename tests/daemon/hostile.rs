@@ -1542,6 +1542,8 @@ fn the_limits_are_documented_where_users_read_them() {
         l::FEATURE_VALUE.to_string(),
         l::CAPTURE_SLOTS.to_string(),
         l::MESHES.to_string(),
+        l::PLAN_PICTURE_WIDTH[1].to_string(),
+        l::PLAN_STEP[0].to_string(),
         omniwarp::server::STREAMS.to_string(),
         omniwarp::server::FEEDS.to_string(),
         omniwarp::server::RESERVE.to_string(),

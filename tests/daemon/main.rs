@@ -4,6 +4,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod canvas;
 mod console;
 mod daemon;
 mod disconnect;

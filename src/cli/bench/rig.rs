@@ -80,10 +80,7 @@ pub fn run(dome_rig: &Path) -> Result<()> {
                 channels: vec![omniwarp::rig::ChannelDoc {
                     id: "p".into(),
                     resolution: [3840, 2160],
-                    lens: omniwarp::rig::LensDoc {
-                        model: lens.into(),
-                        intrinsics: intrinsics.clone(),
-                    },
+                    lens: omniwarp::rig::LensDoc::new(lens, intrinsics.clone()),
                     pose: omniwarp::rig::PoseDoc {
                         position: [0.0, 0.3, 0.5],
                         look_to: Some([0.0, 0.0, -1.0]),
@@ -91,6 +88,7 @@ pub fn run(dome_rig: &Path) -> Result<()> {
                         rvec: None,
                     },
                 }],
+                canvas: None,
             };
             let rig = Rig::from_doc(doc)?;
             // The best of three, each with its outputs freshly allocated (as a warp computed

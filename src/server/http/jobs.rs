@@ -3,10 +3,10 @@
 //! memory and kept on disk by a hash of its inputs.
 
 use super::state::AppState;
+use crate::rig::Canvas;
 use crate::rig::Rig;
 use crate::server::ApiError;
 use crate::server::storage::cache::{Computed, Geometry};
-use crate::server::storage::canvas::Canvas;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -29,6 +29,26 @@ impl Job {
     pub fn etag(&self) -> String {
         etag(self.key, self.rig_revision, self.tiles_revision)
     }
+
+    /// [`Job::etag`] with a hash of the canvas after it, for what the canvas shapes besides
+    /// the warp (the exports).
+    pub fn export_etag(&self) -> String {
+        format!(
+            "{}-{:016x}\"",
+            self.etag().trim_end_matches('"'),
+            self.canvas_digest()
+        )
+    }
+
+    /// A hash of the channel's canvas.
+    pub fn canvas_digest(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        serde_json::to_vec(&self.canvas)
+            .expect("canvases serialise")
+            .hash(&mut h);
+        h.finish()
+    }
 }
 
 pub fn etag(key: u64, rig_revision: u64, tiles_revision: u64) -> String {
@@ -48,7 +68,13 @@ pub fn keys(
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
     id.hash(&mut h);
-    serde_json::to_vec(&rig.doc)
+    // The show's canvas is in the rig document but not in its geometry: a new canvas keeps
+    // the warps (its projection centre, which moves them, is hashed below).
+    let geometry = crate::rig::RigDoc {
+        canvas: None,
+        ..rig.doc.clone()
+    };
+    serde_json::to_vec(&geometry)
         .expect("rigs serialise")
         .hash(&mut h);
     // The document names a mesh; a mesh deleted and uploaded again under its name is another.
@@ -166,7 +192,7 @@ pub async fn inputs(s: &Arc<AppState>, id: &str) -> Result<Inputs, ApiError> {
         (
             now.tiles.value.clone(),
             now.tiles.revision,
-            now.content.value.clone(),
+            now.content.value.clone().unwrap_or_else(|| rig.canvas()),
         )
     };
     let (geometry_key, key) = keys(&rig, id, &tiles, canvas.project_from);

@@ -1,13 +1,13 @@
 //! Per-channel editable resources: the content canvas and the tile screen, each with its own
 //! revision (`ETag`, `If-Match`, 412 with the current one when stale).
 
+use crate::rig::Canvas;
 use crate::rig::{Rig, SAMPLED_COLUMNS, default_rows};
 use crate::server::ApiError;
 use crate::server::http::jobs::run_write;
 use crate::server::http::state::{
     AppState, AtRevision, Query, document_at, if_match, meta, parse_body, tagged,
 };
-use crate::server::storage::canvas::Canvas;
 use crate::server::storage::db::Meta;
 use crate::server::storage::store::{
     Channel, ChannelData, ChannelWriter, Versioned, content_resource, tiles_resource,
@@ -189,10 +189,44 @@ pub async fn get_content(
         Some(r) if r != revision => (r, document_at(&s, content_resource(&id), r).await?),
         _ => (revision, content),
     };
+    // A channel without a canvas of its own plays the rig's, as it is now.
+    let own = !content.is_null();
+    let content = if own {
+        content
+    } else {
+        serde_json::to_value(s.store.snapshot().0.canvas()).expect("canvases serialise")
+    };
     Ok(tagged(
-        serde_json::json!({"revision": revision, "content": content}),
+        serde_json::json!({"revision": revision, "content": content, "own": own}),
         revision,
     ))
+}
+
+/// `DELETE /v1/channels/{id}/content`: the channel drops its own canvas and plays the rig's.
+pub async fn delete_content(
+    State(s): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let wanted = if_match(&headers)?;
+    let d = data(&s, &id).await?;
+    let g = d.write().await;
+    fresh(g.content.revision, wanted)?;
+    if g.content.value.is_none() {
+        return Err(ApiError::refused(
+            axum::http::StatusCode::CONFLICT,
+            None,
+            "the channel has no canvas of its own: it already plays the rig's",
+        ));
+    }
+    let revision = wanted + 1;
+    let mut next = g.clone();
+    next.content = Versioned {
+        revision,
+        value: None,
+    };
+    commit(&s, &id, g, next, Part::Content, meta(&s, "delete", None)).await?;
+    Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
 
 pub async fn put_content(
@@ -212,7 +246,7 @@ pub async fn put_content(
     let mut next = g.clone();
     next.content = Versioned {
         revision,
-        value: canvas,
+        value: Some(canvas),
     };
     let request = Some(serde_json::to_value(&next.content.value).expect("canvases serialise"));
     commit(&s, &id, g, next, Part::Content, meta(&s, "put", request)).await?;

@@ -133,7 +133,7 @@ pub async fn channel_export(
         }
     };
     let j = job(&s, &id).await?;
-    let etag = j.etag();
+    let etag = j.export_etag();
     let id2 = id.clone();
     let made = run_job(&s, move |cancel| {
         make(owned(j, &id2)?, &name, tol, reader, cancel)
@@ -288,7 +288,7 @@ pub async fn mpcdi_package(
     let etag = format!(
         "\"{}\"",
         jobs.iter()
-            .map(|(_, j)| format!("{:016x}", j.key))
+            .map(|(_, j)| format!("{:016x}{:016x}", j.key, j.canvas_digest()))
             .collect::<Vec<_>>()
             .join("-")
     );

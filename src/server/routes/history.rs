@@ -263,7 +263,9 @@ async fn channel_step(
     match part {
         Part::Content => {
             next.content.value = serde_json::from_value(doc).map_err(kept)?;
-            next.content.value.view()?;
+            if let Some(c) = &next.content.value {
+                c.view()?;
+            }
             next.content.revision = revision;
         }
         Part::Tiles => {

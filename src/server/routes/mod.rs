@@ -11,5 +11,6 @@ pub mod geometry;
 pub mod history;
 pub mod meshes;
 pub mod outputs;
+pub mod plan;
 pub mod rig;
 pub mod show;

@@ -3,7 +3,6 @@
 //! the computed warps kept on disk by the keeper, and what is kept computed in memory.
 
 pub(crate) mod cache;
-pub(crate) mod canvas;
 pub mod db;
 pub(crate) mod keep;
 pub(crate) mod store;

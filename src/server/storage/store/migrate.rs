@@ -146,10 +146,10 @@ fn file_proposals(dir: &Path) -> Vec<(u64, serde_json::Value)> {
 /// A channel's saved state, validated as a PUT of its content and tiles would be.
 fn parse_channel(path: &Path) -> crate::Result<ChannelData> {
     let data: ChannelData = parse_json(path)?;
-    data.content
-        .value
-        .view()
-        .map_err(|e| crate::Error::file(path, format!("content: {e}")))?;
+    if let Some(c) = &data.content.value {
+        c.view()
+            .map_err(|e| crate::Error::file(path, format!("content: {e}")))?;
+    }
     if let Some(t) = &data.tiles.value {
         t.validate()
             .map_err(|e| crate::Error::file(path, format!("tiles: {e}")))?;

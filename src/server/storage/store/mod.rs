@@ -1,5 +1,6 @@
-//! What the daemon holds and how it is kept: the rig (with its revision), each channel's content
-//! canvas and tile screen (each with its own revision), and calibration proposals.
+//! What the daemon holds and how it is kept: the rig (with its revision, and the show's content
+//! canvas in it), each channel's own content canvas, if it has one, and tile screen (each with
+//! its own revision), and calibration proposals.
 //!
 //! They live in memory as they are served and in SQLite ([`super::db`]) as they are kept: each
 //! write is one transaction that makes the new document current and appends it to the history,
@@ -18,9 +19,9 @@
 
 mod migrate;
 
-use super::canvas::Canvas;
 use super::db::{self, Db, Meta};
 use crate::image_io::{create_private_dir_durably, remove_leftovers};
+use crate::rig::Canvas;
 use crate::rig::{Rig, RigDoc};
 use crate::tiles::TileScreen;
 use serde::de::DeserializeOwned;
@@ -99,8 +100,10 @@ pub struct Versioned<T> {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelData {
-    /// The content canvas the channel's media server plays, with its revision.
-    pub content: Versioned<Canvas>,
+    /// The channel's own content canvas, with its revision; `None`: it plays the rig's
+    /// (`canvas` in the rig document). Data directories from before the rig had a canvas keep
+    /// each channel's canvas as its own.
+    pub content: Versioned<Option<Canvas>>,
     /// The edited tile screen (`None`: the geometry's exact warp), with its revision.
     pub tiles: Versioned<Option<TileScreen>>,
 }
@@ -110,7 +113,7 @@ impl Default for ChannelData {
         ChannelData {
             content: Versioned {
                 revision: 1,
-                value: Canvas::default(),
+                value: None,
             },
             tiles: Versioned {
                 revision: 1,
@@ -510,8 +513,10 @@ fn load_valid<T>(
 fn load_channel(db: &Db, id: &str, reset: bool) -> crate::Result<ChannelData> {
     let mut data = ChannelData::default();
     let content = load_valid(db, &content_resource(id), |v| {
-        let c: Canvas = from_json(v)?;
-        c.view()?;
+        let c: Option<Canvas> = from_json(v)?;
+        if let Some(c) = &c {
+            c.view()?;
+        }
         Ok(c)
     })?;
     match content {

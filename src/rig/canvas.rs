@@ -1,6 +1,7 @@
-//! A channel's content canvas: the content image its media server plays (a projection and view,
-//! its size) and, for a panorama projected from a point (seed 001), that point. The 2d exports
-//! point into it; the warp follows its projection centre.
+//! A content canvas: the content image a media server plays (a projection and view, its size)
+//! and, for a panorama projected from a point (seed 001), that point. The rig holds the show's
+//! canvas; a channel may have its own. The 2d exports point into it; the warp follows its
+//! projection centre.
 
 crate::projection::doc::view_document! {
     /// The content image a channel's 2d exports point into: a projection and view (as for
