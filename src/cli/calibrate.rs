@@ -16,8 +16,8 @@ pub struct CalibrateArgs {
     /// in metres. Example: calibration/examples/points.json.
     #[arg(
         long,
-        required_unless_present = "captures",
-        conflicts_with = "captures"
+        required_unless_present_any = ["captures", "rig_captures"],
+        conflicts_with_all = ["captures", "rig_captures"]
     )]
     correspondences: Option<PathBuf>,
     /// Instead of --correspondences: a folder of camera captures of the structured-light
@@ -27,19 +27,29 @@ pub struct CalibrateArgs {
     /// Needs --camera, --rig and --channel.
     #[arg(long, requires_all = ["camera", "rig", "channel"])]
     captures: Option<PathBuf>,
+    /// A whole rig in one command: a folder holding one capture folder per projector, each
+    /// named by its channel id in --rig, all filmed by the one camera (--camera, posed once by
+    /// its own pose, --markers or --pose-captures). Every projector found is calibrated and
+    /// written into --rig together, or none is; the channels without a folder are kept.
+    #[arg(
+        long,
+        requires_all = ["camera", "rig"],
+        conflicts_with_all = ["captures", "channel", "check", "out", "update"]
+    )]
+    rig_captures: Option<PathBuf>,
     /// The camera that took the captures, as a rig channel (JSON), its pose known.
     #[arg(long)]
     camera: Option<PathBuf>,
     /// Markers that give the camera's pose instead of --camera's own (its lens is kept): JSON
     /// {"points": [{"pixel": [u, v], "world": [x, y, z]}, …]}, wall points of known position
     /// and the camera pixels where they appear; at least 4.
-    #[arg(long, requires = "captures")]
+    #[arg(long, requires = "camera")]
     markers: Option<PathBuf>,
     /// Instead of --markers: captures of the sequence shown by another projector, one already
     /// calibrated in --rig (--pose-channel), filmed by the camera from where it now stands. The
     /// camera's pose is solved from them, its lens kept: what that projector decodes to at a
     /// camera pixel, followed to the wall, is a marker there.
-    #[arg(long, requires_all = ["captures", "pose_channel"], conflicts_with = "markers")]
+    #[arg(long, requires_all = ["camera", "pose_channel"], conflicts_with = "markers")]
     pose_captures: Option<PathBuf>,
     /// The channel of --rig that --pose-captures show.
     #[arg(long, requires = "pose_captures")]
@@ -79,7 +89,7 @@ pub struct CalibrateArgs {
     id: String,
     /// The projector as a rig channel (JSON). With --check: the channel re-fitted from the
     /// same captures, written whatever the verdict.
-    #[arg(long, required_unless_present_any = ["check", "update"])]
+    #[arg(long, required_unless_present_any = ["check", "update", "rig_captures"])]
     out: Option<PathBuf>,
     /// Instead of --out: put the calibrated projector into --rig as its channel --channel (the
     /// file rewritten atomically, every other field kept), and print how it moved.
@@ -88,6 +98,9 @@ pub struct CalibrateArgs {
 }
 
 pub fn run(a: CalibrateArgs) -> Result<()> {
+    if let Some(dir) = &a.rig_captures {
+        return whole_rig(&a, dir);
+    }
     if let Some(dir) = &a.captures {
         return from_captures(&a, dir);
     }
@@ -174,22 +187,41 @@ fn place(
         );
     }
     let path = a.rig.as_ref().expect("clap requires it");
+    update_rig(
+        path,
+        vec![(id.to_string(), cal.channel_doc(id, resolution))],
+        "--channel",
+    )
+}
+
+/// Puts each channel document into the rig file at `path` in place of the channel of its id,
+/// validates the whole rig and writes it once (atomically), then says how each projector
+/// moved. `flag` names where an unknown id came from.
+fn update_rig(
+    path: &std::path::Path,
+    updates: Vec<(String, omniwarp::rig::ChannelDoc)>,
+    flag: &str,
+) -> Result<()> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("--rig {}", path.display()))?;
     let mut doc = omniwarp::rig::RigDoc::parse(&text)
         .map_err(|e| anyhow::anyhow!("--rig {}: {}", path.display(), named(e)))?;
-    let Some(slot) = doc.channels.iter_mut().find(|c| c.id == id) else {
-        let ids: Vec<_> = doc.channels.iter().map(|c| c.id.as_str()).collect();
-        anyhow::bail!(
-            "--channel: no channel `{id}` in --rig; it has {}",
-            ids.join(", ")
-        );
-    };
-    let before = omniwarp::rig::Channel::from_doc(slot, "before")
-        .map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
-    *slot = cal.channel_doc(id, resolution);
-    let after = omniwarp::rig::Channel::from_doc(slot, "after")
-        .map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
+    let mut moves = Vec::new();
+    for (id, channel) in updates {
+        let Some(slot) = doc.channels.iter_mut().find(|c| c.id == id) else {
+            let ids: Vec<_> = doc.channels.iter().map(|c| c.id.as_str()).collect();
+            anyhow::bail!(
+                "{flag}: no channel `{id}` in --rig; it has {}",
+                ids.join(", ")
+            );
+        };
+        let before = omniwarp::rig::Channel::from_doc(slot, "before")
+            .map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
+        *slot = channel;
+        let after = omniwarp::rig::Channel::from_doc(slot, "after")
+            .map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
+        moves.push((id, before, after));
+    }
     // Validated whole, its mesh read beside it, before the file is touched.
     let base = path.parent().unwrap_or(std::path::Path::new("."));
     let mut check = doc.clone();
@@ -198,23 +230,25 @@ fn place(
     write_json(path, &doc)?;
     let forward = |c: &omniwarp::rig::Channel| c.rotation * glam::DVec3::Z;
     let focal = |c: &omniwarp::rig::Channel| c.lens.intrinsics()[0];
-    let turned = forward(&before).angle_between(forward(&after)).to_degrees();
-    eprintln!(
-        "{}: channel {id} updated: moved {:.3} m, turned {turned:.2}°, {} f {:.1} px → {} f {:.1} px",
-        path.display(),
-        (after.position - before.position).length(),
-        before.lens.model(),
-        focal(&before),
-        after.lens.model(),
-        focal(&after)
-    );
-    // A first calibration of a planned rig moves projectors; one that turns a projector round
-    // is more likely another projector's points.
-    if turned > 30.0 {
+    for (id, before, after) in moves {
+        let turned = forward(&before).angle_between(forward(&after)).to_degrees();
         eprintln!(
-            "warning: channel {id} now looks {turned:.0}° away from where the rig had it; if \
-             these were another projector's points, put the file back from your copy"
+            "{}: channel {id} updated: moved {:.3} m, turned {turned:.2}°, {} f {:.1} px → {} f {:.1} px",
+            path.display(),
+            (after.position - before.position).length(),
+            before.lens.model(),
+            focal(&before),
+            after.lens.model(),
+            focal(&after)
         );
+        // A first calibration of a planned rig moves projectors; one that turns a projector
+        // round is more likely another projector's points.
+        if turned > 30.0 {
+            eprintln!(
+                "warning: channel {id} now looks {turned:.0}° away from where the rig had it; \
+                 if these were another projector's points, put the file back from your copy"
+            );
+        }
     }
     Ok(())
 }
@@ -223,54 +257,20 @@ fn place(
 fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     use omniwarp::rig::Rig;
     use omniwarp::structured::decode::{DecodeOptions, decode};
-    use omniwarp::structured::{
-        PatternSet, calibrate_captures, calibrate_decoded, check, read_captures,
-    };
+    use omniwarp::structured::{calibrate_captures, calibrate_decoded, check, read_captures};
     let rig_path = a.rig.as_ref().expect("clap requires it");
     let rig = Rig::read(rig_path).with_context(|| format!("--rig {}", rig_path.display()))?;
     let id = a.channel.as_deref().expect("clap requires it");
     let projector = rig
         .channel(id)
         .map_err(|e| anyhow::anyhow!("--channel: {}", named(e)))?;
-    let mut camera = read_camera(a.camera.as_ref().expect("clap requires it"))?;
-    if let Some(path) = &a.markers {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("--markers {}", path.display()))?;
-        let de = &mut serde_json::Deserializer::from_str(&text);
-        let doc: CorrespondencesDoc = serde_path_to_error::deserialize(de).map_err(|e| {
-            anyhow::anyhow!(
-                "--markers: {}: {}",
-                omniwarp::rig::pointer_of(&e.path().to_string()),
-                e.inner()
-            )
-        })?;
-        let (posed, rms) = omniwarp::structured::camera_pose(&camera, &doc.points)
-            .map_err(|e| anyhow::anyhow!("--markers: {}", named(e)))?;
-        eprintln!(
-            "camera pose from {} markers: position {:?}, marker RMS {rms:.3} px",
-            doc.points.len(),
-            posed.position.to_array()
-        );
-        camera = posed;
-    }
-    if let Some(dir) = &a.pose_captures {
-        camera = pose_from_projector(a, &rig, dir, camera)?;
-    }
-    let choice = match a.model.as_deref().unwrap_or("auto") {
-        "auto" => ModelChoice::Auto,
-        m => ModelChoice::Fixed(
-            m.parse()
-                .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", e.reason()))?,
-        ),
-    };
+    let camera = posed_camera(a, &rig)?;
+    let choice = model_choice(a)?;
     omniwarp::limits::at_most("--points", a.points, omniwarp::limits::CALIBRATION_POINTS)
         .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
     let frames = read_captures(dir).map_err(|e| anyhow::anyhow!("--captures: {}", named(e)))?;
     let resolution = [projector.width, projector.height];
-    let set = PatternSet::new(resolution[0], resolution[1])?
-        .with_period(a.period)
-        .map_err(|e| anyhow::anyhow!("--{}", named(e)))?
-        .with_code(a.code);
+    let set = pattern_set(a, resolution)?;
     let opts = DecodeOptions::default();
     if let Some(out) = &a.check {
         let decoded = decode(&set, &frames, &opts)
@@ -340,6 +340,129 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     );
     report(&found.calibration, found.problem.points.len());
     place(a, &found.calibration, resolution)
+}
+
+/// --camera, posed by --markers or --pose-captures when given.
+fn posed_camera(a: &CalibrateArgs, rig: &omniwarp::rig::Rig) -> Result<omniwarp::rig::Channel> {
+    let mut camera = read_camera(a.camera.as_ref().expect("clap requires it"))?;
+    if let Some(path) = &a.markers {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("--markers {}", path.display()))?;
+        let de = &mut serde_json::Deserializer::from_str(&text);
+        let doc: CorrespondencesDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+            anyhow::anyhow!(
+                "--markers: {}: {}",
+                omniwarp::rig::pointer_of(&e.path().to_string()),
+                e.inner()
+            )
+        })?;
+        let (posed, rms) = omniwarp::structured::camera_pose(&camera, &doc.points)
+            .map_err(|e| anyhow::anyhow!("--markers: {}", named(e)))?;
+        eprintln!(
+            "camera pose from {} markers: position {:?}, marker RMS {rms:.3} px",
+            doc.points.len(),
+            posed.position.to_array()
+        );
+        camera = posed;
+    }
+    if let Some(dir) = &a.pose_captures {
+        camera = pose_from_projector(a, rig, dir, camera)?;
+    }
+    Ok(camera)
+}
+
+fn model_choice(a: &CalibrateArgs) -> Result<ModelChoice> {
+    Ok(match a.model.as_deref().unwrap_or("auto") {
+        "auto" => ModelChoice::Auto,
+        m => ModelChoice::Fixed(
+            m.parse()
+                .map_err(|e: omniwarp::Error| anyhow::anyhow!("--model: {}", e.reason()))?,
+        ),
+    })
+}
+
+/// The structured-light sequence a projector of `resolution` showed, as --period and --code
+/// say.
+fn pattern_set(
+    a: &CalibrateArgs,
+    resolution: [u32; 2],
+) -> Result<omniwarp::structured::PatternSet> {
+    Ok(
+        omniwarp::structured::PatternSet::new(resolution[0], resolution[1])?
+            .with_period(a.period)
+            .map_err(|e| anyhow::anyhow!("--{}", named(e)))?
+            .with_code(a.code),
+    )
+}
+
+/// `--rig-captures`: every projector with a capture folder calibrated from it with the one
+/// camera, and written into the rig together.
+fn whole_rig(a: &CalibrateArgs, root: &std::path::Path) -> Result<()> {
+    use omniwarp::structured::{calibrate_captures, decode::DecodeOptions, read_captures};
+    let rig_path = a.rig.as_ref().expect("clap requires it");
+    let rig = omniwarp::rig::Rig::read(rig_path)
+        .with_context(|| format!("--rig {}", rig_path.display()))?;
+    let mut folders: Vec<(String, PathBuf)> = std::fs::read_dir(root)
+        .with_context(|| format!("--rig-captures {}", root.display()))?
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().is_dir())
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), e.path()))
+        .collect();
+    folders.sort();
+    if folders.is_empty() {
+        anyhow::bail!(
+            "--rig-captures {}: no capture folders in it (one per projector, named by its \
+             channel id)",
+            root.display()
+        );
+    }
+    // Every folder names a channel before any work starts.
+    for (id, _) in &folders {
+        rig.channel(id)
+            .map_err(|e| anyhow::anyhow!("--rig-captures: folder `{id}`: {}", e.reason()))?;
+    }
+    let camera = posed_camera(a, &rig)?;
+    let choice = model_choice(a)?;
+    omniwarp::limits::at_most("--points", a.points, omniwarp::limits::CALIBRATION_POINTS)
+        .map_err(|e| anyhow::anyhow!("{}", named(e)))?;
+    let mut updates = Vec::new();
+    for (id, dir) in &folders {
+        let projector = rig.channel(id).expect("checked above");
+        let resolution = [projector.width, projector.height];
+        let what = |e: omniwarp::Error| anyhow::anyhow!("--rig-captures: {id}: {}", named(e));
+        let frames = read_captures(dir).map_err(what)?;
+        let found = calibrate_captures(
+            &pattern_set(a, resolution)?,
+            &frames,
+            &camera,
+            &rig.doc.screen,
+            choice,
+            a.points,
+            &DecodeOptions::default(),
+            &Default::default(),
+        )
+        .map_err(what)?;
+        eprintln!(
+            "{id}: decoded {} camera pixels; {} RMS {:.4} px over {} points",
+            found.decoded.valid(),
+            found.calibration.fit.lens.model(),
+            found.calibration.fit.rms,
+            found.problem.points.len()
+        );
+        for w in &found.calibration.warnings {
+            eprintln!("{id}: warning: {w}");
+        }
+        updates.push((id.clone(), found.calibration.channel_doc(id, resolution)));
+    }
+    let n = updates.len();
+    update_rig(rig_path, updates, "--rig-captures")?;
+    outln!(
+        "{}: {n} of {} channels calibrated from {}",
+        rig_path.display(),
+        rig.channels.len(),
+        root.display()
+    );
+    Ok(())
 }
 
 /// `--pose-captures`: the camera posed from another projector's captures.

@@ -15,7 +15,8 @@ pub enum RigCommand {
     Check(CheckArgs),
     /// Write a starting rig from a few figures: the wall, how many projectors of which
     /// resolution, and how much neighbours overlap. Pinhole lenses and poses aimed to share the
-    /// wall evenly, for `rig check` to report on and calibration to replace.
+    /// wall evenly, for `rig check` to report on and calibration to replace, and the show's
+    /// canvas the wall is made for: a dome master, the cylinder unrolled, the flat wall's view.
     New(NewArgs),
     /// Plan a rig before hanging it: how much of the wall none, one, two or more projectors
     /// light, each overlap's width in degrees, pixel density from the eye, pixels wasted off
@@ -169,7 +170,7 @@ fn generate(a: &Layout) -> Result<omniwarp::rig::Rig> {
         bail!("--overlap: must be 0 to 100 percent, got {}", a.overlap);
     }
     let up = DVec3::Y;
-    let (screen, channels) = match shape {
+    let (screen, channels, canvas) = match shape {
         Shape::Cylinder => {
             let ([lo, hi], [from, to]) = (pair(&a.height, "--height")?, pair(&a.arc, "--arc")?);
             let share = (to - from) / f64::from(n);
@@ -189,7 +190,15 @@ fn generate(a: &Layout) -> Result<omniwarp::rig::Rig> {
                 })
                 .collect::<Result<Vec<_>>>()?;
             let screen = serde_json::json!({"kind": "cylinder", "radius": a.radius, "height": [lo, hi], "arc": [from, to]});
-            (screen, channels)
+            // The wall unrolled: the arc across, its height up, about 8K wide.
+            let reach = lo.abs().max(hi.abs());
+            let vfov = 2.0 * (reach / a.radius).atan().to_degrees();
+            let tall = 2.0 * reach / ((to - from).to_radians() * a.radius);
+            let canvas = serde_json::json!({"projection": "cylindrical",
+                "params": {"hfov": to - from, "vfov": vfov},
+                "look_to": direction((from + to) / 2.0, 0.0).to_array(),
+                "size": [7680, ((7680.0 * tall).round() as u32).clamp(16, 7680)]});
+            (screen, channels, canvas)
         }
         Shape::Dome => {
             let screen = serde_json::json!({"kind": "dome", "radius": a.radius, "tilt": a.tilt});
@@ -230,7 +239,11 @@ fn generate(a: &Layout) -> Result<omniwarp::rig::Rig> {
                     cap.min(150.0),
                 )?);
             }
-            (screen, channels)
+            // A dome master: the dome's zenith at its centre, the front at the bottom.
+            let canvas = serde_json::json!({"projection": "fisheye", "params": {"fov": 180},
+                "look_to": zenith.to_array(), "look_up": (-front).to_array(),
+                "size": [4096, 4096]});
+            (screen, channels, canvas)
         }
         Shape::Plane => {
             let height = a.height.first().copied().unwrap_or(2.5).abs();
@@ -250,11 +263,15 @@ fn generate(a: &Layout) -> Result<omniwarp::rig::Rig> {
                     )
                 })
                 .collect::<Result<Vec<_>>>()?;
-            (screen, channels)
+            let fov = |side: f64| 2.0 * (side / 2.0 / a.distance).atan().to_degrees();
+            let canvas = serde_json::json!({"projection": "flat",
+                "params": {"hfov": fov(a.width), "vfov": fov(height)},
+                "size": [3840, ((3840.0 * height / a.width).round() as u32).clamp(16, 7680)]});
+            (screen, channels, canvas)
         }
     };
-    let doc =
-        serde_json::json!({"format": 1, "screen": screen, "eye": [0, 0, 0], "channels": channels});
+    let doc = serde_json::json!({"format": 1, "screen": screen, "eye": [0, 0, 0],
+        "channels": channels, "canvas": canvas});
     // Refused here, with the field, rather than by whoever reads the file next.
     omniwarp::rig::RigDoc::parse(&doc.to_string())
         .and_then(omniwarp::rig::Rig::from_doc)

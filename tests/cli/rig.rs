@@ -127,6 +127,21 @@ fn rig_new_writes_a_rig_whose_projectors_share_the_wall() {
         for c in check_json(&path, "8").as_array().unwrap() {
             assert!(c["on_wall"].as_f64().unwrap() > 0.5, "{shape}: {c}");
         }
+        // The show's canvas the wall is made for: a dome master looking up the dome, the flat
+        // wall's view from the eye (6 m at 3 m: 90° across).
+        let doc: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let canvas = &doc["canvas"];
+        match shape {
+            "dome" => {
+                assert_eq!(canvas["projection"], "fisheye");
+                assert_eq!(canvas["look_to"], serde_json::json!([0.0, 1.0, -0.0]));
+            }
+            _ => {
+                assert_eq!(canvas["projection"], "flat");
+                assert!((canvas["params"]["hfov"].as_f64().unwrap() - 90.0).abs() < 1e-9);
+            }
+        }
     }
     for (args, says) in [
         (
@@ -505,4 +520,107 @@ fn export_points_into_the_rigs_canvas_without_projection_flags() {
         &out("none.exr"),
     ]);
     assert!(!ok && err.contains("--content-size"), "{err}");
+}
+
+#[test]
+fn a_folder_of_capture_folders_calibrates_a_whole_dome_in_one_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = env!("CARGO_MANIFEST_DIR");
+    let truth_path = format!("{root}/calibration/rigs/dome-180-tilt15-5proj.json");
+    let truth = omniwarp::rig::Rig::read(std::path::Path::new(&truth_path)).unwrap();
+    let shots = dir.path().join("shots");
+    let folder = |id: &str| shots.join(id).to_str().unwrap().to_string();
+    // One camera for all five: the simulator's fisheye at the eye, looking up the dome.
+    let (ok, _, err) = omniwarp(&[
+        "simulate",
+        "--rig",
+        &truth_path,
+        "--channel",
+        "zenith",
+        "--out",
+        &folder("zenith"),
+    ]);
+    assert!(ok, "{err}");
+    let camera = shots
+        .join("zenith/camera.json")
+        .to_str()
+        .unwrap()
+        .to_string();
+    std::thread::scope(|s| {
+        for id in ["front", "right", "back", "left"] {
+            let (truth_path, camera, out) = (&truth_path, &camera, folder(id));
+            s.spawn(move || {
+                let (ok, _, err) = omniwarp(&[
+                    "simulate",
+                    "--rig",
+                    truth_path,
+                    "--channel",
+                    id,
+                    "--camera",
+                    camera,
+                    "--out",
+                    &out,
+                ]);
+                assert!(ok, "{id}: {err}");
+            });
+        }
+    });
+    // The rig as planned: every projector 5 cm off and a guessed pinhole lens.
+    let mut planned = truth.doc.clone();
+    for c in &mut planned.channels {
+        c.pose.position = c.pose.position.map(|v| v + 0.05);
+        c.lens =
+            omniwarp::rig::LensDoc::new("LENSMODEL_PINHOLE", vec![1000.0, 1000.0, 959.5, 599.5]);
+    }
+    let rig = dir.path().join("rig.json");
+    std::fs::write(&rig, serde_json::to_string_pretty(&planned).unwrap()).unwrap();
+    let calibrate = |root: &str| {
+        omniwarp(&[
+            "calibrate",
+            "--rig-captures",
+            root,
+            "--camera",
+            &camera,
+            "--rig",
+            rig.to_str().unwrap(),
+            "--model",
+            "LENSMODEL_OPENCV4",
+            "--points",
+            "20000",
+        ])
+    };
+    let (ok, out, err) = calibrate(shots.to_str().unwrap());
+    assert!(ok, "{err}");
+    assert!(out.contains("5 of 5 channels calibrated"), "{out}");
+    // Each projector where it is, within what docs/calibration.md promises (2 mm, 0.02°).
+    let fitted = omniwarp::rig::Rig::read(&rig).unwrap();
+    let errors: Vec<(String, f64, f64)> = fitted
+        .channels
+        .iter()
+        .zip(&truth.channels)
+        .map(|(f, t)| {
+            let turned = (f.rotation * glam::DVec3::Z)
+                .angle_between(t.rotation * glam::DVec3::Z)
+                .to_degrees();
+            (f.id.clone(), (f.position - t.position).length(), turned)
+        })
+        .collect();
+    for (id, moved, turned) in &errors {
+        assert!(*moved < 0.002 && *turned < 0.02, "{id}: {errors:?}");
+    }
+    assert!(
+        fitted
+            .channels
+            .iter()
+            .all(|c| c.lens.model().to_string() == "LENSMODEL_OPENCV4")
+    );
+    // A folder that names no channel is refused before any work, and the rig is left alone.
+    std::fs::create_dir(shots.join("projector-6")).unwrap();
+    let before = std::fs::read(&rig).unwrap();
+    let (ok, _, err) = calibrate(shots.to_str().unwrap());
+    assert!(
+        !ok && err.contains("projector-6") && err.contains("--rig-captures"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&rig).unwrap(), before);
 }
