@@ -21,6 +21,7 @@ mod cubemap;
 mod export;
 mod io;
 mod lens;
+mod man;
 mod measure;
 mod normal_map;
 mod pattern;
@@ -33,7 +34,7 @@ mod simulate;
 mod tiles;
 mod warp;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 #[cfg(feature = "bench")]
 use std::path::PathBuf;
 
@@ -98,6 +99,9 @@ enum Command {
     /// Benchmarks: time one part of omniwarp and print the figures (run on demand, not in CI).
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Write the manual pages (roff), one per command, generated from this command line.
+    #[command(hide = true)]
+    Man(man::ManArgs),
     // The benchmarks' names before they were gathered under `bench`, kept for old scripts.
     #[cfg(feature = "bench")]
     #[command(hide = true)]
@@ -119,6 +123,7 @@ enum Command {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Serve(a) => serve::run(a),
+        Command::Man(a) => man::run(a, Cli::command()),
         Command::Render(a) => render::run(*a),
         Command::NormalMap(a) => normal_map::run(a),
         Command::Cubemap(a) => cubemap::run(a),

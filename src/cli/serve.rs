@@ -258,7 +258,13 @@ pub fn run(a: ServeArgs) -> Result<()> {
             }
         }
         std::io::Write::flush(&mut std::io::stdout())?;
+        // Under systemd (Type=notify) the unit is started once the port takes connections;
+        // elsewhere NOTIFY_SOCKET is unset and this does nothing.
+        if let Err(e) = sd_notify::notify(&[sd_notify::NotifyState::Ready]) {
+            tracing::warn!(error = %e, "could not tell the service manager we are ready");
+        }
         launch(listener, state, shutdown_signal()).await?;
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
         tracing::info!("stopped");
         Ok(())
     })

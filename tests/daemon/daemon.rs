@@ -247,3 +247,52 @@ fn thirty_two_clients_editing_one_screen_lose_nothing() {
     stop.send(()).unwrap();
     rt.block_on(server).unwrap().unwrap();
 }
+
+#[test]
+fn the_daemon_tells_a_service_manager_it_is_ready_once_its_port_answers() {
+    // systemd's Type=notify: READY=1 as a datagram to $NOTIFY_SOCKET, sent only once the
+    // port takes connections.
+    use std::os::unix::net::UnixDatagram;
+    let dir = tempfile::tempdir().unwrap();
+    let socket = dir.path().join("notify");
+    let manager = UnixDatagram::bind(&socket).unwrap();
+    manager
+        .set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_omniwarp"))
+        .args(["serve", "--demo", "--bind", "127.0.0.1:0", "--data"])
+        .arg(dir.path().join("data"))
+        .env("NOTIFY_SOCKET", &socket)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut buf = [0u8; 256];
+    let n = manager.recv(&mut buf).unwrap();
+    let said = String::from_utf8_lossy(&buf[..n]).to_string();
+    assert!(said.lines().any(|l| l == "READY=1"), "{said}");
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let addr: std::net::SocketAddr = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .unwrap()
+        .parse()
+        .unwrap();
+    let reply = omniwarp::server::client::Client::new(addr, None)
+        .get("/v1/health")
+        .unwrap();
+    assert_eq!(reply.status, 200);
+    // A stop is announced too.
+    std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let n = manager.recv(&mut buf).unwrap();
+    assert!(String::from_utf8_lossy(&buf[..n]).contains("STOPPING=1"));
+    child.wait().unwrap();
+}
