@@ -1,14 +1,17 @@
-/* The rig-warp probe of issue 15: what a plain C program needs to compute one channel's warp,
- * to hold `omniwarp bench rig` against. A 3840x2160 OPENCV5 projector (the intrinsics, pose and
- * surfaces of src/cli/bench/rig.rs) is unprojected pixel by pixel with Newton's method from the
- * neighbouring pixel's answer to a residual below 1e-10 px, its ray is hit against the wall
- * (the cylinder's test includes the arc check with atan2, as omniwarp's does), and the
- * content sampling vector and wall point are written as float RGBA, rows in parallel (OpenMP).
+/* The rig-warp probe: what a plain C program needs to compute one channel's warp, to hold
+ * `omniwarp bench rig` against. An OPENCV5 projector of 3840x2160 (or 1920x1080, the
+ * intrinsics scaled; those of src/cli/bench/rig.rs, pose and surfaces too) is unprojected pixel
+ * by pixel with Newton's method from the neighbouring pixel's answer to a residual below
+ * 1e-10 px, its ray is hit against the wall (the cylinder's test includes the arc check with
+ * atan2, the dome's the elevation check against the rim's sine, as omniwarp's do), and the content sampling
+ * vector and wall point are written as float RGBA, rows in parallel (OpenMP).
  *
- *   cc -O2 -fopenmp -o rig_probe rig_probe.c -lm && OMP_NUM_THREADS=2 ./rig_probe cylinder
+ *   cc -O3 -march=native -fopenmp -o rig_probe rig_probe.c -lm
+ *   OMP_NUM_THREADS=2 ./rig_probe cylinder|dome|plane [3840x2160|1920x1080]
  *
- * Prints the best of five runs (outputs allocated in each) in milliseconds and the lit pixel
- * count. */
+ * Built for the machine it runs on (-march=native, which lets the compiler fuse multiplies and
+ * adds) it is the hardware's pace; `omniwarp bench rig` builds and runs it so. Prints the best
+ * of five runs (outputs allocated in each) in milliseconds and the lit pixel count. */
 #include <math.h>
 #include <omp.h>
 #include <stdio.h>
@@ -16,8 +19,8 @@
 #include <string.h>
 #include <time.h>
 
-enum { W = 3840, H = 2160 };
-static const double F[4] = {2400.0, 2400.0, 1919.5, 1079.5};
+static int W = 3840, H = 2160;
+static double F[4] = {2400.0, 2400.0, 1919.5, 1079.5};
 static const double K[5] = {-0.05, 0.01, 0.0005, -0.0003, -0.002}; /* k1 k2 p1 p2 k3 */
 static const double POS[3] = {0.0, 0.3, 0.5};
 
@@ -42,10 +45,27 @@ static int undistort(double u, double v, double *x, double *y) {
     return 0;
 }
 
+enum Surface { CYLINDER, DOME, PLANE };
+
 /* Ray parameter of the first wall hit, or -1. */
-static double hit(int cylinder, const double d[3]) {
+static double hit(enum Surface surface, const double d[3]) {
     const double *o = POS;
-    if (cylinder) { /* radius 2 about +y through the origin, height -2..2, arc -180..180 */
+    if (surface == DOME) { /* radius 3 about the origin, zenith tilted 15 deg to -z, down to -30 deg */
+        static const double tilt = 15.0 * M_PI / 180.0, lowest = -0.5; /* sin(-30 deg) */
+        double b = d[0] * o[0] + d[1] * o[1] + d[2] * o[2];
+        double c = o[0] * o[0] + o[1] * o[1] + o[2] * o[2] - 9.0, disc = b * b - c;
+        if (disc < 0) return -1;
+        double s = sqrt(disc), roots[2] = {-b - s, -b + s};
+        for (int n = 0; n < 2; n++) {
+            double t = roots[n];
+            if (t <= 1e-9) continue;
+            double px = o[0] + t * d[0], py = o[1] + t * d[1], pz = o[2] + t * d[2];
+            double up = (px * 0.0 + py * cos(tilt) - pz * sin(tilt)) / 3.0;
+            if (up >= lowest) return t;
+        }
+        return -1;
+    }
+    if (surface == CYLINDER) { /* radius 2 about +y through the origin, height -2..2, arc -180..180 */
         double a = d[0] * d[0] + d[2] * d[2], b = 2 * (d[0] * o[0] + d[2] * o[2]);
         double c = o[0] * o[0] + o[2] * o[2] - 4.0, disc = b * b - 4 * a * c;
         if (disc < 0 || a == 0) return -1;
@@ -67,7 +87,7 @@ static double hit(int cylinder, const double d[3]) {
     return (fabs(px) <= 6 && fabs(py) <= 4) ? t : -1;
 }
 
-static long warp(int cylinder, float *map, float *wall) {
+static long warp(enum Surface surface, float *map, float *wall) {
     long lit = 0;
 #pragma omp parallel for schedule(dynamic, 8) reduction(+ : lit)
     for (int j = 0; j < H; j++) {
@@ -82,7 +102,7 @@ static long warp(int cylinder, float *map, float *wall) {
             }
             /* camera (x right, y down, z forward) to world: look-to -z, look-up +y */
             double n = sqrt(x * x + y * y + 1), d[3] = {x / n, -y / n, -1 / n};
-            double t = hit(cylinder, d);
+            double t = hit(surface, d);
             if (t < 0) continue;
             double p[3] = {POS[0] + t * d[0], POS[1] + t * d[1], POS[2] + t * d[2]};
             double len = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]); /* eye at the origin */
@@ -98,22 +118,33 @@ static long warp(int cylinder, float *map, float *wall) {
 }
 
 int main(int argc, char **argv) {
-    int cylinder = argc > 1 && strcmp(argv[1], "cylinder") == 0;
+    const char *name = argc > 1 ? argv[1] : "plane";
+    enum Surface surface = strcmp(name, "cylinder") == 0 ? CYLINDER
+                           : strcmp(name, "dome") == 0   ? DOME
+                                                         : PLANE;
+    if (argc > 2 && sscanf(argv[2], "%dx%d", &W, &H) == 2 && W > 0 && H > 0) {
+        double scale = W / 3840.0;
+        F[0] *= scale;
+        F[1] *= scale;
+        F[2] = (F[2] + 0.5) * scale - 0.5;
+        F[3] = (F[3] + 0.5) * scale - 0.5;
+    }
     double best = 1e30;
     long lit = 0;
     for (int run = 0; run < 5; run++) {
         struct timespec a, b;
         clock_gettime(CLOCK_MONOTONIC, &a);
         /* Fresh outputs each run, as a warp computed on request has. */
-        float *map = malloc(sizeof(float) * 4 * W * H), *wall = malloc(sizeof(float) * 4 * W * H);
-        lit = warp(cylinder, map, wall);
+        float *map = malloc(sizeof(float) * 4 * (size_t)W * H);
+        float *wall = malloc(sizeof(float) * 4 * (size_t)W * H);
+        lit = warp(surface, map, wall);
         clock_gettime(CLOCK_MONOTONIC, &b);
         free(map);
         free(wall);
         double ms = (b.tv_sec - a.tv_sec) * 1e3 + (b.tv_nsec - a.tv_nsec) / 1e6;
         if (ms < best) best = ms;
     }
-    printf("probe %s: %.0f ms, %ld lit, %d threads\n", cylinder ? "cylinder" : "plane", best, lit,
+    printf("probe %s %dx%d: %.1f ms, %ld lit, %d threads\n", name, W, H, best, lit,
            omp_get_max_threads());
     return 0;
 }

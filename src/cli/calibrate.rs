@@ -228,25 +228,23 @@ fn update_rig(
     check.screen.load(base, "/screen")?;
     omniwarp::rig::Rig::from_doc(check).map_err(|e| anyhow::anyhow!("--rig: {}", named(e)))?;
     write_json(path, &doc)?;
-    let forward = |c: &omniwarp::rig::Channel| c.rotation * glam::DVec3::Z;
-    let focal = |c: &omniwarp::rig::Channel| c.lens.intrinsics()[0];
     for (id, before, after) in moves {
-        let turned = forward(&before).angle_between(forward(&after)).to_degrees();
+        let c = before.change_to(&after);
         eprintln!(
-            "{}: channel {id} updated: moved {:.3} m, turned {turned:.2}°, {} f {:.1} px → {} f {:.1} px",
+            "{}: channel {id} updated: moved {:.3} m, turned {:.2}°, {} f {:.1} px → {} f {:.1} px",
             path.display(),
-            (after.position - before.position).length(),
-            before.lens.model(),
-            focal(&before),
-            after.lens.model(),
-            focal(&after)
+            c.moved,
+            c.turned,
+            c.model[0],
+            c.focal[0],
+            c.model[1],
+            c.focal[1]
         );
-        // A first calibration of a planned rig moves projectors; one that turns a projector
-        // round is more likely another projector's points.
-        if turned > 30.0 {
+        if c.turned > omniwarp::rig::ChannelChange::SUSPICIOUS_TURN {
             eprintln!(
-                "warning: channel {id} now looks {turned:.0}° away from where the rig had it; \
-                 if these were another projector's points, put the file back from your copy"
+                "warning: channel {id} now looks {:.0}° away from where the rig had it; if \
+                 these were another projector's points, put the file back from your copy",
+                c.turned
             );
         }
     }

@@ -23,6 +23,9 @@ pub enum RigCommand {
     /// the wall and brightness before blending; `--picture` draws it. Give a rig file, or
     /// `rig new`'s figures (then `--sweep` varies one of them).
     Plan(PlanArgs),
+    /// Print the rig document's JSON Schema (the one published as api/rig.schema.json), for
+    /// editors and other tools to check rig files with.
+    Schema,
 }
 
 #[derive(Clone, Copy, PartialEq, ValueEnum)]
@@ -122,6 +125,10 @@ pub fn run(c: RigCommand) -> Result<()> {
         RigCommand::Check(a) => check(a),
         RigCommand::New(a) => new(a),
         RigCommand::Plan(a) => plan(a),
+        RigCommand::Schema => {
+            outln!("{}", omniwarp::rig::schema::text().trim_end());
+            Ok(())
+        }
     }
 }
 

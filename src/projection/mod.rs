@@ -71,7 +71,16 @@ impl ShaderForm {
 }
 
 /// Projection parameters as the user gives them: angles in degrees, `None` when not given.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct Params {
     /// Horizontal field of view, degrees.

@@ -11,6 +11,7 @@ mod blend;
 mod canvas;
 mod coverage;
 pub mod plan;
+pub mod schema;
 mod tiles;
 mod warp;
 
@@ -35,7 +36,7 @@ use std::path::Path;
 pub const DEMO_RIG: &str = include_str!("../../calibration/rigs/cylinder-270-3proj.json");
 
 /// The rig file as written.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RigDoc {
     /// The document's format version; only 1 is known.
@@ -71,8 +72,25 @@ impl RigDoc {
     pub fn parse(text: &str) -> Result<RigDoc> {
         let mut de = serde_json::Deserializer::from_str(text);
         let doc: RigDoc = serde_path_to_error::deserialize(&mut de).map_err(|e| {
-            let pointer = pointer_of(&e.path().to_string());
-            Error::invalid(pointer, e.into_inner().to_string())
+            let mut pointer = pointer_of(&e.path().to_string());
+            let mut reason = e.into_inner().to_string();
+            // serde reads a tagged enum (the screen) whole before its variant, so the error
+            // stops at `/screen`: read the variant again on its own for the field within.
+            if pointer == "/screen"
+                && let Some((inner, why)) = screen_error(text)
+            {
+                (pointer, reason) = (format!("/screen{inner}"), why);
+            }
+            // What belongs there, from the schema the same types publish.
+            let doc = serde_json::from_str(text).unwrap_or(serde_json::Value::Null);
+            let reason = match schema::describe(&pointer, &doc) {
+                Some(d) => {
+                    let first = d.split(". ").next().unwrap_or(&d).trim_end_matches('.');
+                    format!("{reason} ({first})")
+                }
+                None => reason,
+            };
+            Error::invalid(pointer, reason)
         })?;
         de.end()
             .map_err(|e| Error::invalid("/", format!("text after the rig document: {e}")))?;
@@ -80,10 +98,32 @@ impl RigDoc {
     }
 }
 
+/// The pointer within the screen (`/radius`) and the reason its variant refuses it, read on its
+/// own from the rig text; `None` when that finds nothing more precise.
+fn screen_error(text: &str) -> Option<(String, String)> {
+    use crate::surface::{Cylinder, Dome, Plane};
+    let mut screen = serde_json::from_str::<serde_json::Value>(text).ok()?["screen"].take();
+    let kind = screen.as_object_mut()?.remove("kind")?;
+    fn inner<T: serde::de::DeserializeOwned>(v: serde_json::Value) -> Option<(String, String)> {
+        let e = serde_path_to_error::deserialize::<_, T>(v).err()?;
+        Some((
+            pointer_of(&e.path().to_string()),
+            e.into_inner().to_string(),
+        ))
+    }
+    match kind.as_str()? {
+        "cylinder" => inner::<Cylinder>(screen),
+        "dome" => inner::<Dome>(screen),
+        "plane" => inner::<Plane>(screen),
+        _ => None,
+    }
+    .filter(|(p, _)| p != "/")
+}
+
 /// How content directions relate to the world: V = C·d − O, normalised, where d is the unit
 /// direction from the eye to the wall point and C is built from look-to/look-up as in the
 /// projection view transform.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ContentDoc {
     /// The content direction seen straight ahead of the eye (world −z); any non-zero length,
@@ -111,7 +151,7 @@ impl Default for ContentDoc {
 }
 
 /// One projector channel as the rig file writes it (an element of `channels`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelDoc {
     /// The channel's name, unique in the rig: 1–64 ASCII letters, digits, '-', '_' or '.',
@@ -128,7 +168,7 @@ pub struct ChannelDoc {
 /// A lens as the rig file writes it (a channel's `lens`); docs/lens-models.md has the models.
 /// A planned projector may give its throw ratio and lens shift instead of intrinsics; the rig
 /// holds them as the pinhole intrinsics they amount to.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LensDoc {
     /// mrcal's model name, e.g. `LENSMODEL_OPENCV5`; `LENSMODEL_PINHOLE` when left out.
@@ -217,7 +257,7 @@ impl LensDoc {
 
 /// A projector's pose as the rig file writes it: the projector-to-world transform, given by
 /// `position` and either `look_to` and `look_up` or `rvec`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PoseDoc {
     /// The projector's centre of projection in the world, metres.
@@ -327,6 +367,42 @@ impl Channel {
             position,
             rotation,
         })
+    }
+}
+
+/// How a projector changed from one lens and pose to another (a calibration applied): what
+/// `calibrate --update` prints and the daemon's proposal apply answers.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ChannelChange {
+    /// How far its centre of projection moved, metres.
+    pub moved: f64,
+    /// How far its optical axis turned, degrees.
+    pub turned: f64,
+    /// Its lens model, before and after.
+    pub model: [String; 2],
+    /// Its focal length fx, before and after, pixels.
+    pub focal: [f64; 2],
+}
+
+impl ChannelChange {
+    /// A turn beyond which the points were more likely another projector's than this one's
+    /// (a first calibration of a planned rig moves projectors, but does not turn them round).
+    pub const SUSPICIOUS_TURN: f64 = 30.0;
+}
+
+impl Channel {
+    /// How this channel changed into `after`.
+    pub fn change_to(&self, after: &Channel) -> ChannelChange {
+        let forward = |c: &Channel| c.rotation * DVec3::Z;
+        ChannelChange {
+            moved: (after.position - self.position).length(),
+            turned: forward(self).angle_between(forward(after)).to_degrees(),
+            model: [
+                self.lens.model().to_string(),
+                after.lens.model().to_string(),
+            ],
+            focal: [self.lens.intrinsics()[0], after.lens.intrinsics()[0]],
+        }
     }
 }
 

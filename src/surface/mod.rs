@@ -108,7 +108,7 @@ impl PreparedScreen<'_> {
 }
 
 /// A projection screen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Screen {
     /// `"kind": "cylinder"`: part of a cylinder, lit from inside.

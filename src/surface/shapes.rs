@@ -27,7 +27,7 @@ fn roots(a: f64, b: f64, c: f64) -> Option<(f64, f64)> {
 }
 
 /// A cylinder seen from inside.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Cylinder {
     /// Metres.
@@ -156,7 +156,7 @@ impl PreparedCylinder<'_> {
 }
 
 /// A spherical dome seen from inside.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Dome {
     /// The sphere's radius, metres.
@@ -254,7 +254,7 @@ impl PreparedDome {
 }
 
 /// A flat rectangle.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Plane {
     /// The rectangle's centre, metres.

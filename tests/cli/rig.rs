@@ -624,3 +624,43 @@ fn a_folder_of_capture_folders_calibrates_a_whole_dome_in_one_command() {
     );
     assert_eq!(std::fs::read(&rig).unwrap(), before);
 }
+
+#[test]
+fn warp_writes_every_channels_warp_and_blend_in_one_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = env!("CARGO_MANIFEST_DIR");
+    let rig = format!("{root}/calibration/rigs/flat-2proj.json");
+    let at = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (ok, out, err) = omniwarp(&["warp", "--rig", &rig, "--out-dir", &at("all")]);
+    assert!(ok, "{err}");
+    assert!(out.starts_with("2 warps and blends"), "{out}");
+    // Not a terminal here: a line a channel.
+    assert!(err.contains("left: warp and blend written (1/2"), "{err}");
+    let (ok, _, err) = omniwarp(&[
+        "warp",
+        "--rig",
+        &rig,
+        "--channel",
+        "right",
+        "--out",
+        &at("right.exr"),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = omniwarp(&["blend", "--rig", &rig, "--out-dir", &at("blends")]);
+    assert!(ok, "{err}");
+    let pixels = |path: &str| {
+        let (img, _) = omniwarp::image_io::read_exr_rgba(Path::new(path)).unwrap();
+        img.data
+            .iter()
+            .flatten()
+            .map(|v| v.to_bits())
+            .collect::<Vec<u32>>()
+    };
+    assert!(pixels(&at("all/right.exr")) == pixels(&at("right.exr")));
+    for id in ["left", "right"] {
+        let mask = |p: &str| image::open(p).unwrap().into_luma16().into_raw();
+        assert!(
+            mask(&at(&format!("all/{id}-blend.png"))) == mask(&at(&format!("blends/{id}.png")))
+        );
+    }
+}

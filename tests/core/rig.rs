@@ -493,3 +493,43 @@ fn the_blend_pngs_a_media_server_gets_sum_to_one() {
 /// (cylinder), 0.016 (dome), 0.048 (flat), from bilinear sampling of the others' ramps; reading
 /// the masks as linear instead of gamma 2.2 puts the sums off by 0.2 and more.
 const MASK_SUM_TOLERANCE: f64 = 0.06;
+
+#[test]
+fn the_published_rig_schema_is_the_one_the_types_generate() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("api/rig.schema.json");
+    let published = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(
+        published == omniwarp::rig::schema::text(),
+        "api/rig.schema.json is not what the rig types generate: `omniwarp rig schema > \
+         api/rig.schema.json`"
+    );
+}
+
+#[test]
+fn a_mistyped_field_is_named_and_described_from_the_schema() {
+    let dome = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("calibration/rigs/dome-180-tilt15-5proj.json"),
+    )
+    .unwrap();
+    let mut doc: serde_json::Value = serde_json::from_str(&dome).unwrap();
+    doc["screen"]["radius"] = "3 m".into();
+    let e = omniwarp::rig::RigDoc::parse(&doc.to_string())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("/screen/radius") && e.contains("The sphere's radius, metres"),
+        "{e}"
+    );
+    let mut doc: serde_json::Value = serde_json::from_str(&dome).unwrap();
+    doc["channels"][2]["lens"] = serde_json::json!({"throw_ratio": "long"});
+    let e = omniwarp::rig::RigDoc::parse(&doc.to_string())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("/channels/2/lens/throw_ratio") && e.contains("Throw distance over image width"),
+        "{e}"
+    );
+    // Descriptions are written for people: no rustdoc links left in them.
+    assert!(!omniwarp::rig::schema::text().contains("[`"));
+}

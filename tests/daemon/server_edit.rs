@@ -418,11 +418,17 @@ async fn calibration_proposals_are_solved_kept_and_applied() {
         call(&s, write("POST", &apply, None, String::new())).await.0,
         StatusCode::PRECONDITION_REQUIRED
     );
-    let (st, h, _) = call(&s, write("POST", &apply, Some(1), String::new())).await;
+    let (st, h, applied) = call(&s, write("POST", &apply, Some(1), String::new())).await;
     assert_eq!(
         (st, h[header::ETAG].to_str().unwrap()),
         (StatusCode::OK, "\"2\"")
     );
+    // Before and after: the points were the channel's own, so it hardly moved.
+    let change = &json(&applied)["change"];
+    assert!(change["moved"].as_f64().unwrap() < 0.01, "{change}");
+    assert!(change["turned"].as_f64().unwrap() < 0.5, "{change}");
+    assert_eq!(change["model"][0], "LENSMODEL_OPENCV4");
+    assert!(json(&applied).get("warning").is_none());
     let (_, _, body) = call(&s, get("/v1/rig")).await;
     assert_eq!(
         json(&body)["rig"]["channels"][1]["lens"],

@@ -141,7 +141,19 @@ pub async fn apply_proposal(
     *slot = p.proposed.clone();
     let next = Rig::from_doc(doc)?;
     next.check_budget(s.options.memory_budget)?;
+    let change = rig
+        .channel(&p.channel)
+        .and_then(|before| Ok(before.change_to(next.channel(&p.channel)?)))?;
     let request = serde_json::json!({ "proposal": p.id });
     let revision = commit_rig(&s, wanted, next, meta(&s, "apply", Some(request))).await?;
-    Ok(tagged(serde_json::json!({"revision": revision}), revision))
+    let mut body = serde_json::json!({"revision": revision, "change": change});
+    if change.turned > crate::rig::ChannelChange::SUSPICIOUS_TURN {
+        body["warning"] = format!(
+            "channel {} now looks {:.0}° away from where the rig had it: if these were another \
+             projector's points, undo the rig (POST /v1/rig/undo)",
+            p.channel, change.turned
+        )
+        .into();
+    }
+    Ok(tagged(body, revision))
 }
