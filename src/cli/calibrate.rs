@@ -105,16 +105,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         return from_captures(&a, dir);
     }
     let path = a.correspondences.as_ref().expect("clap requires one");
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("--correspondences {}", path.display()))?;
-    let de = &mut serde_json::Deserializer::from_str(&text);
-    let input: CorrespondencesDoc = serde_path_to_error::deserialize(de).map_err(|e| {
-        anyhow::anyhow!(
-            "--correspondences: {}: {}",
-            omniwarp::rig::pointer_of(&e.path().to_string()),
-            e.inner()
-        )
-    })?;
+    let input = read_points(path, "--correspondences")?;
     let resolution = input.resolution.context(
         "--correspondences: /resolution: needed: the projector's [width, height] in pixels",
     )?;
@@ -340,20 +331,26 @@ fn from_captures(a: &CalibrateArgs, dir: &std::path::Path) -> Result<()> {
     place(a, &found.calibration, resolution)
 }
 
+/// A correspondences document (pixels and wall points) read from `path`; errors name `flag`
+/// and the field by JSON pointer.
+fn read_points(path: &std::path::Path, flag: &str) -> Result<CorrespondencesDoc> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("{flag} {}", path.display()))?;
+    let de = &mut serde_json::Deserializer::from_str(&text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        anyhow::anyhow!(
+            "{flag}: {}: {}",
+            omniwarp::rig::pointer_of(&e.path().to_string()),
+            e.inner()
+        )
+    })
+}
+
 /// --camera, posed by --markers or --pose-captures when given.
 fn posed_camera(a: &CalibrateArgs, rig: &omniwarp::rig::Rig) -> Result<omniwarp::rig::Channel> {
     let mut camera = read_camera(a.camera.as_ref().expect("clap requires it"))?;
     if let Some(path) = &a.markers {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("--markers {}", path.display()))?;
-        let de = &mut serde_json::Deserializer::from_str(&text);
-        let doc: CorrespondencesDoc = serde_path_to_error::deserialize(de).map_err(|e| {
-            anyhow::anyhow!(
-                "--markers: {}: {}",
-                omniwarp::rig::pointer_of(&e.path().to_string()),
-                e.inner()
-            )
-        })?;
+        let doc = read_points(path, "--markers")?;
         let (posed, rms) = omniwarp::structured::camera_pose(&camera, &doc.points)
             .map_err(|e| anyhow::anyhow!("--markers: {}", named(e)))?;
         eprintln!(

@@ -1,4 +1,4 @@
-//! Rig plans (src/rig/plan.rs) against figures worked out by hand: a flat wall lit by two
+//! Rig plans (src/rig/plan/) against figures worked out by hand: a flat wall lit by two
 //! pinhole projectors, the example dome's waste, and throw ratios as a data sheet gives them.
 
 use omniwarp::rig::{Rig, RigDoc};
