@@ -36,13 +36,15 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 struct Panorama {
     // centre C (world) in xyz
     centre: vec4<f32>,
-    // world → panorama frame (the inverse of the content orientation), by columns
+    // world → panorama frame (Content::frame: the inverse of the content orientation, and a
+    // dome master's turn), by columns
     turn0: vec4<f32>,
     turn1: vec4<f32>,
     turn2: vec4<f32>,
-    // kind (0 cube, 1 equirect, 2 cylinder), atlas width, atlas height, pad
+    // kind (0 cube, 1 equirect, 2 cylinder, 3 fisheye), atlas width, atlas height, pad
     head: vec4<u32>,
-    // cube: face size; panorama: width, height, hfov (radians), vfov (radians) or H
+    // cube: face size; panorama: width, height, hfov (radians), vfov (radians) or H;
+    // fisheye: the circle's centre x, y and radius (atlas texels), half its field of view
     p: vec4<f32>,
 }
 
@@ -79,6 +81,18 @@ fn pano_locate(world: vec3<f32>) -> vec3<f32> {
         let t = 0.5 * (tc / ma + 1.0);
         let y0 = f32(face) * (n + 2.0 * pad);
         return vec3<f32>(s * n - 0.5 + pad, y0 + t * n - 0.5 + pad, 1.0);
+    }
+    if pano.head.x == 3u {
+        let rho = length(d.xy);
+        let theta = atan2(rho, -d.z);
+        if theta > pano.p.w {
+            return vec3<f32>(0.0);
+        }
+        if rho == 0.0 {
+            return vec3<f32>(pano.p.xy, 1.0);
+        }
+        let k = pano.p.z * theta / (pano.p.w * rho);
+        return vec3<f32>(pano.p.x + k * d.x, pano.p.y - k * d.y, 1.0);
     }
     let u = 0.5 + atan2(d.x, -d.z) / pano.p.z;
     let rho = length(d.xz);

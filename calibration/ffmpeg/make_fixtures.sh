@@ -41,4 +41,7 @@ v360 input_equirect_ffmpeg.png equirect_to_c3x2.png "input=e:output=c3x2:w=384:h
 v360 input_equirect_ffmpeg.png equirect_to_c6x1.png "input=e:output=c6x1:w=768:h=128"
 v360 equirect_to_c3x2.png c3x2_to_equirect.png "input=c3x2:output=e:w=512:h=256"
 v360 equirect_to_c6x1.png c6x1_to_equirect.png "input=c6x1:output=e:w=512:h=256"
+# ffmpeg's own fisheye back to equirect: its fisheye input, like its equirect input, puts the
+# circle's rim on the centres of the edge pixels (radius 127.5 pixels about (128, 128) here).
+v360 equirect_to_fisheye_180.png fisheye_to_equirect.png "input=fisheye:ih_fov=180:iv_fov=180:output=e:w=512:h=256"
 echo "wrote $out"

@@ -103,7 +103,8 @@ pub fn flag_error(e: omniwarp::Error) -> anyhow::Error {
 
 #[derive(Args)]
 pub struct ContentArgs {
-    /// Content image: PNG or JPEG (8-bit) or OpenEXR (float).
+    /// Content image: PNG or JPEG (8-bit) or OpenEXR (float); for `render`, also a movie
+    /// or an image sequence (`frame-%05d.png`), read with ffmpeg.
     #[arg(long)]
     pub content: Option<PathBuf>,
     /// How the content image is laid out.
@@ -116,6 +117,17 @@ pub struct ContentArgs {
     /// pixels otherwise).
     #[arg(long)]
     pub content_vfov: Option<f64>,
+    /// Field of view across a fisheye's or dome master's image circle, degrees (default 180;
+    /// up to 360).
+    #[arg(long)]
+    pub content_fov: Option<f64>,
+    /// Forward tilt of a dome master's zenith, degrees (default 0; ±90).
+    #[arg(long, allow_hyphen_values = true)]
+    pub content_tilt: Option<f64>,
+    /// A fisheye's image circle: centre x,y and radius, in pixels from the image's top-left
+    /// corner (default: the circle inscribed in the image).
+    #[arg(long, value_parser = parse_vec3)]
+    pub content_circle: Option<DVec3>,
     /// Orientation of the content in the world: yaw,pitch,roll in degrees (yaw turns left,
     /// pitch up, roll clockwise).
     #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
@@ -160,6 +172,11 @@ pub enum ContentFormat {
     Equirect,
     /// Cylindrical panorama (seed 001: height linear on the cylinder).
     Cylindrical,
+    /// Angular (equidistant) fisheye looking ahead: --content-fov, --content-circle.
+    Fisheye,
+    /// Dome master: an angular fisheye with the zenith at its centre and the front of the dome
+    /// at the bottom: --content-fov, --content-tilt, --content-circle.
+    Domemaster,
     /// Six files: --content names them with `{face}`, replaced by px nx py ny pz nz.
     CubemapFaces,
 }
@@ -172,6 +189,8 @@ impl ContentFormat {
             ContentFormat::CubemapC6x1 => Format::CubemapC6x1,
             ContentFormat::Equirect => Format::Equirect,
             ContentFormat::Cylindrical => Format::Cylindrical,
+            ContentFormat::Fisheye => Format::Fisheye,
+            ContentFormat::Domemaster => Format::Domemaster,
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use super::args::{ContentArgs, ContentFormat, CubeLayoutArg, flag_error};
 use anyhow::{Context, Result, bail};
-use omniwarp::content::Content;
+use omniwarp::content::{Content, Fisheye, Format};
 use omniwarp::cubemap::{CubeMap, Face};
 use omniwarp::image_io::{self, Loaded, Precision};
 use omniwarp::projection::Orientation;
@@ -36,33 +36,64 @@ pub fn load_content(a: &ContentArgs, want_float: bool) -> Result<AnyContent> {
     let orient =
         Orientation::yaw_pitch_roll(a.content_rotate.x, a.content_rotate.y, a.content_rotate.z)
             .map_err(flag_error)?;
-    let fmt = format.format();
-    let (hfov, vfov) = (a.content_hfov, a.content_vfov);
     let lookup = a.content_lookup;
     let content = match loaded {
-        Loaded::U8(r) if !want_float => AnyContent::U8(
-            lookup.apply(
-                Content::from_image(&r, fmt, hfov, vfov)
-                    .map_err(flag_error)?
-                    .with_orientation(orient),
-            )?,
-        ),
-        Loaded::U8(r) => AnyContent::F32(
-            lookup.apply(
-                Content::from_image(&r.map(to_float), fmt, hfov, vfov)
-                    .map_err(flag_error)?
-                    .with_orientation(orient),
-            )?,
-        ),
-        Loaded::F32(r) => AnyContent::F32(
-            lookup.apply(
-                Content::from_image(&r, fmt, hfov, vfov)
-                    .map_err(flag_error)?
-                    .with_orientation(orient),
-            )?,
-        ),
+        Loaded::U8(r) if !want_float => {
+            AnyContent::U8(lookup.apply(layout(a, &r)?.with_orientation(orient))?)
+        }
+        Loaded::U8(r) => {
+            AnyContent::F32(lookup.apply(layout(a, &r.map(to_float))?.with_orientation(orient))?)
+        }
+        Loaded::F32(r) => AnyContent::F32(lookup.apply(layout(a, &r)?.with_orientation(orient))?),
     };
     Ok(content)
+}
+
+/// Content from an image as the content flags describe its layout (before orientation and
+/// lookup): the first frame of a movie goes through here too.
+pub fn layout<T: Pixel>(a: &ContentArgs, image: &Raster<T>) -> Result<Content<T>> {
+    let format = a
+        .content_format
+        .context("--content-format: needed with --content")?
+        .format();
+    let fisheye = match format {
+        Format::Fisheye => Some(Fisheye::FISHEYE),
+        Format::Domemaster => Some(Fisheye::DOMEMASTER),
+        _ => None,
+    };
+    let Some(mut f) = fisheye else {
+        if let Some(flag) = [
+            ("--content-fov", a.content_fov.is_some()),
+            ("--content-tilt", a.content_tilt.is_some()),
+            ("--content-circle", a.content_circle.is_some()),
+        ]
+        .iter()
+        .find_map(|(n, given)| given.then_some(n))
+        {
+            bail!("{flag}: for fisheye and domemaster content only");
+        }
+        return Content::from_image(image, format, a.content_hfov, a.content_vfov)
+            .map_err(flag_error);
+    };
+    if a.content_hfov.is_some() || a.content_vfov.is_some() {
+        bail!(
+            "--content-hfov: a fisheye's field of view is its image circle's: give --content-fov"
+        );
+    }
+    if a.content_tilt.is_some() && format == Format::Fisheye {
+        bail!("--content-tilt: tilts a dome master (--content-format domemaster)");
+    }
+    if let Some(fov) = a.content_fov {
+        f.fov = fov;
+    }
+    if let Some(t) = a.content_tilt {
+        f.tilt = Some(t);
+    }
+    if let Some(c) = a.content_circle {
+        f.centre = Some([c.x, c.y]);
+        f.radius = Some(c.z);
+    }
+    Content::fisheye(image, &f).map_err(flag_error)
 }
 
 pub fn to_float(p: [u8; 4]) -> [f32; 4] {

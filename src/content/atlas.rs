@@ -7,12 +7,18 @@
 //!   meet, the mean of the three candidates;
 //! * full panoramas: the columns of the other side (wrap-around); over the poles of a full
 //!   equirectangular image, the row mirrored across the pole half a turn round;
+//! * a fisheye's image circle: outside it, the texel on the same radius one texel inside the
+//!   rim, so that filtering at the rim reads the picture and not the black around the circle;
 //! * anything else: the nearest edge texel (clamp).
+//!
+//! Apart from a cube's corners, every texel is a copy of one source pixel, so a new frame of a
+//! movie is laid out by the same rule, reading each pixel where it is ([`Atlas::refill`]).
 
 use crate::cubemap::{self, CubeMap, Face};
 use crate::raster::{Pixel, Raster};
 use crate::{Error, Result};
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Border width: bicubic filtering reads one texel before and two after the sample position.
 pub const PAD: usize = 2;
@@ -58,36 +64,107 @@ impl<T: Pixel> Atlas<T> {
     /// 360° panorama), clamped otherwise, and mirrored over the poles when `poles` (a full
     /// 360° × 180° equirect). An error for images under 2×2 pixels.
     pub fn panorama(image: &Raster<T>, wrap: bool, poles: bool) -> Result<Self> {
-        let (w, h) = (image.width as isize, image.height as isize);
+        let rule = Rule::Panorama { wrap, poles };
+        let mut atlas = Atlas::sized(image.width, image.height)?;
+        atlas.refill(rule, image.width, image.height, |x, y| image.get(x, y));
+        Ok(atlas)
+    }
+
+    /// A fisheye image with its border, the circle centred at (`cx`, `cy`) image pixels from
+    /// the top-left corner with radius `radius` pixels.
+    pub fn fisheye(image: &Raster<T>, cx: f64, cy: f64, radius: f64) -> Result<Self> {
+        let rule = Rule::Circle { cx, cy, radius };
+        let mut atlas = Atlas::sized(image.width, image.height)?;
+        atlas.refill(rule, image.width, image.height, |x, y| image.get(x, y));
+        Ok(atlas)
+    }
+
+    fn sized(w: usize, h: usize) -> Result<Self> {
         if w < 2 || h < 2 {
             return Err(Error::invalid(
                 "content",
-                format!("a panorama needs at least 2×2 pixels, got {w}×{h}"),
+                format!("a panorama or fisheye needs at least 2×2 pixels, got {w}×{h}"),
             ));
         }
-        let (pw, ph) = (image.width + 2 * PAD, image.height + 2 * PAD);
-        let mut data = Vec::with_capacity(pw * ph);
-        for y in 0..ph as isize {
-            for x in 0..pw as isize {
-                let (mut x, mut y) = (x - PAD as isize, y - PAD as isize);
+        let (pw, ph) = (w + 2 * PAD, h + 2 * PAD);
+        Ok(Atlas {
+            width: pw,
+            height: ph,
+            data: vec![T::default(); pw * ph],
+        })
+    }
+
+    /// Lays out a `w` × `h` source whose pixel (x, y) is `pixel(x, y)` by `rule`, in place,
+    /// rows in parallel: a movie's next frame, converted from its own pixel format as it is
+    /// read.
+    pub(super) fn refill(
+        &mut self,
+        rule: Rule,
+        w: usize,
+        h: usize,
+        pixel: impl Fn(usize, usize) -> T + Sync,
+    ) {
+        debug_assert_eq!((self.width, self.height), (w + 2 * PAD, h + 2 * PAD));
+        let pw = self.width;
+        self.data
+            .par_chunks_mut(pw)
+            .enumerate()
+            .for_each(|(ay, row)| {
+                let y = ay as isize - PAD as isize;
+                let inside_rows = (0..h as isize).contains(&y);
+                for (ax, texel) in row.iter_mut().enumerate() {
+                    let x = ax as isize - PAD as isize;
+                    let (sx, sy) = match rule {
+                        Rule::Panorama { .. } if inside_rows && (0..w as isize).contains(&x) => {
+                            (x as usize, y as usize)
+                        }
+                        _ => rule.source(x, y, w, h),
+                    };
+                    *texel = pixel(sx, sy);
+                }
+            });
+    }
+}
+
+/// Which source pixel a bordered texel copies (see the module's description).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Rule {
+    Panorama { wrap: bool, poles: bool },
+    Circle { cx: f64, cy: f64, radius: f64 },
+}
+
+impl Rule {
+    /// The source pixel texel (x, y) copies, x and y counted from the image's top-left pixel
+    /// (negative or past the size in the border).
+    fn source(self, x: isize, y: isize, w: usize, h: usize) -> (usize, usize) {
+        let (w, h) = (w as isize, h as isize);
+        let clamp = |x: isize, y: isize| (x.clamp(0, w - 1) as usize, y.clamp(0, h - 1) as usize);
+        match self {
+            Rule::Panorama { wrap, poles } => {
+                let (mut x, mut y) = (x, y);
                 if poles && (y < 0 || y >= h) {
                     // Over a pole: the same latitude on the meridian half a turn round.
                     y = if y < 0 { -1 - y } else { 2 * h - 1 - y };
                     x += w / 2;
                 }
-                let x = if wrap {
-                    x.rem_euclid(w)
-                } else {
-                    x.clamp(0, w - 1)
-                };
-                data.push(image.get(x as usize, y.clamp(0, h - 1) as usize));
+                let x = if wrap { x.rem_euclid(w) } else { x };
+                clamp(x, y)
+            }
+            Rule::Circle { cx, cy, radius } => {
+                let (dx, dy) = (x as f64 + 0.5 - cx, y as f64 + 0.5 - cy);
+                let r2 = dx * dx + dy * dy;
+                let inner = (radius - 0.5).max(0.0);
+                if r2 <= inner * inner {
+                    return clamp(x, y);
+                }
+                // Pulled in along its radius to the last pixel wholly inside the circle.
+                let k = (radius - 1.0).max(0.0) / r2.sqrt();
+                clamp(
+                    (cx + k * dx).floor() as isize,
+                    (cy + k * dy).floor() as isize,
+                )
             }
         }
-        Ok(Atlas {
-            width: pw,
-            height: ph,
-            data,
-        })
     }
 }
 

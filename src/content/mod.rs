@@ -10,6 +10,13 @@
 //! * Cylindrical panorama (seed 001): u = 0.5 + lon/hfov, v = 0.5 − y/(H·√(x² + z²)) with
 //!   H = 2·tan(vfov/2); seed 001 writes v = z/(H·√(x²+y²)) + 0.5 for a z-up frame with v up.
 //!
+//! * Fisheye (angular, equidistant) and dome master: the angle θ from the image circle's axis
+//!   is linear in the distance from the circle's centre, r = R·θ/(fov/2), at the angle
+//!   atan2(y, x) from the +x axis with image rows running down; the axis is −z, or for a dome
+//!   master the zenith tilted forward by `tilt`, the front of the dome at the bottom of the image
+//!   (the projection `domemaster` of [`crate::projection`], read backwards). Directions beyond
+//!   fov/2 from the axis are not covered.
+//!
 //! Each source has its own orientation: the content frame is turned by it before lookup.
 
 mod atlas;
@@ -20,23 +27,40 @@ pub mod testcard;
 
 pub use atlas::{Atlas, PAD};
 
+use atlas::Rule;
+
 use crate::cubemap::{self, CubeMap};
 use crate::error::{Error, Result, finite};
 use crate::projection::Orientation;
 use crate::raster::{Pixel, Raster, split};
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use std::f64::consts::PI;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Kind {
     Cube {
         n: usize,
+        /// How the faces lie in the source image, when the content came from one; a new
+        /// frame ([`Content::refill`]) is split the same way.
+        layout: Option<cubemap::Layout>,
     },
     Panorama {
         w: usize,
         h: usize,
         hfov: f64,
         vertical: Vertical,
+    },
+    Fisheye {
+        w: usize,
+        h: usize,
+        /// The circle's centre and radius in atlas texels (centre as `locate` gives positions).
+        cx: f64,
+        cy: f64,
+        radius: f64,
+        /// Half the field of view, radians.
+        half: f64,
+        /// Content frame → the fisheye's own frame (axis −z): the dome master's turn, inverted.
+        turn: Option<DMat3>,
     },
 }
 
@@ -70,6 +94,12 @@ pub trait Locate: Sync {
     /// covers only part of the sphere that way (a partial panorama). Interpolated positions
     /// near it are recomputed exactly, so coverage is decided exactly.
     fn bounds(&self) -> Option<[f64; 4]> {
+        None
+    }
+
+    /// The circle [centre x, centre y, radius] in atlas texels outside which `locate` gives
+    /// `None`, when the content is a fisheye's image circle; checked like [`Locate::bounds`].
+    fn circle(&self) -> Option<[f64; 3]> {
         None
     }
 
@@ -116,7 +146,10 @@ impl<T: Pixel> Content<T> {
     pub fn cube(cube: &CubeMap<T>) -> Self {
         Content {
             atlas: Atlas::cube(cube),
-            kind: Kind::Cube { n: cube.size },
+            kind: Kind::Cube {
+                n: cube.size,
+                layout: None,
+            },
             orientation: Orientation::default(),
             split: None,
         }
@@ -165,6 +198,125 @@ impl<T: Pixel> Content<T> {
             orientation: Orientation::default(),
             split: None,
         })
+    }
+
+    /// An angular fisheye image or a dome master (see [`Fisheye`]); errors name the field.
+    pub fn fisheye(image: &Raster<T>, f: &Fisheye) -> Result<Self> {
+        let fov = finite("content-fov", f.fov)?;
+        if fov <= 0.0 || fov > 360.0 {
+            return Err(Error::invalid(
+                "content-fov",
+                format!("must be above 0 and at most 360 degrees, got {fov}"),
+            ));
+        }
+        let (w, h) = (image.width as f64, image.height as f64);
+        let [cx, cy] = f.centre.unwrap_or([w / 2.0, h / 2.0]);
+        let (cx, cy) = (finite("content-circle", cx)?, finite("content-circle", cy)?);
+        let radius = finite("content-circle", f.radius.unwrap_or(w.min(h) / 2.0))?;
+        if !(0.0..=w).contains(&cx) || !(0.0..=h).contains(&cy) || radius < 1.0 {
+            return Err(Error::invalid(
+                "content-circle",
+                format!(
+                    "the image circle's centre ({cx}, {cy}) must lie in the {w}×{h} image and its \
+                     radius {radius} be at least a pixel"
+                ),
+            ));
+        }
+        let turn = f
+            .tilt
+            .map(|tilt| {
+                let tilt = finite("content-tilt", tilt)?;
+                if tilt.abs() > 90.0 {
+                    return Err(Error::invalid(
+                        "content-tilt",
+                        format!("must lie within ±90 degrees, got {tilt}"),
+                    ));
+                }
+                // The dome master's turn (crate::projection's `domemaster`), inverted.
+                Ok(DMat3::from_rotation_x((90.0 - tilt).to_radians()).transpose())
+            })
+            .transpose()?;
+        let pad = PAD as f64;
+        Ok(Content {
+            atlas: Atlas::fisheye(image, cx, cy, radius)?,
+            kind: Kind::Fisheye {
+                w: image.width,
+                h: image.height,
+                cx: cx - 0.5 + pad,
+                cy: cy - 0.5 + pad,
+                radius,
+                half: fov.to_radians() / 2.0,
+                turn,
+            },
+            orientation: Orientation::default(),
+            split: None,
+        })
+    }
+
+    /// Takes the pixels of a new frame of the same size and layout, keeping the geometry (and
+    /// so every plan made for it): a movie's frame loop. `pixel(x, y)` reads pixel (x, y) of
+    /// the `size` = (width, height) frame, converting it from the frame's own pixel format as it
+    /// goes; an error if the size differs from the first frame's, or for a cube map not read
+    /// from one image.
+    pub fn refill(
+        &mut self,
+        size: (usize, usize),
+        pixel: impl Fn(usize, usize) -> T + Sync,
+    ) -> Result<()> {
+        let same = |w: usize, h: usize| -> Result<()> {
+            if (w, h) != size {
+                return Err(Error::invalid(
+                    "content",
+                    format!(
+                        "a frame is {}×{} pixels where the first was {w}×{h}",
+                        size.0, size.1
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        match self.kind {
+            Kind::Cube { layout, n } => {
+                let layout = layout.ok_or_else(|| {
+                    Error::invalid("content", "this cube map was not read from one image")
+                })?;
+                let (w, h) = layout.image_size(n);
+                same(w, h)?;
+                let image = Raster::from_fn(w, h, pixel);
+                self.atlas = Atlas::cube(&layout.split(&image)?);
+            }
+            Kind::Panorama {
+                w,
+                h,
+                hfov,
+                vertical,
+            } => {
+                same(w, h)?;
+                let full = (hfov - 2.0 * PI).abs() < 1e-12;
+                let poles = full
+                    && matches!(vertical, Vertical::Equirect { vfov } if (vfov - PI).abs() < 1e-12);
+                self.atlas
+                    .refill(Rule::Panorama { wrap: full, poles }, w, h, pixel);
+            }
+            Kind::Fisheye {
+                w,
+                h,
+                cx,
+                cy,
+                radius,
+                ..
+            } => {
+                same(w, h)?;
+                let pad = PAD as f64;
+                let rule = Rule::Circle {
+                    cx: cx + 0.5 - pad,
+                    cy: cy + 0.5 - pad,
+                    radius,
+                };
+                self.atlas.refill(rule, w, h, pixel);
+            }
+        }
+        Ok(())
     }
 
     /// Looks a cylindrical panorama up by seed 001's split into a linear part and a residual
@@ -221,11 +373,13 @@ impl<T: Pixel> Content<T> {
     }
 
     /// How directions map into the atlas, for a GPU twin of [`Locate::locate`]: kind (0 cube,
-    /// 1 equirect, 2 cylinder), then the face size or the panorama's width, height, hfov and
-    /// vfov (equirect, radians) or H = 2·tan(vfov/2) (cylinder).
+    /// 1 equirect, 2 cylinder, 3 fisheye), then the face size, or the panorama's width, height,
+    /// hfov and vfov (equirect, radians) or H = 2·tan(vfov/2) (cylinder), or the fisheye
+    /// circle's centre x, y and radius in atlas texels and half its field of view (radians).
+    /// Directions are turned into the content's frame by [`Content::frame`] first.
     pub fn lookup(&self) -> (u32, [f64; 4]) {
         match self.kind {
-            Kind::Cube { n } => (0, [n as f64, 0.0, 0.0, 0.0]),
+            Kind::Cube { n, .. } => (0, [n as f64, 0.0, 0.0, 0.0]),
             Kind::Panorama {
                 w,
                 h,
@@ -238,6 +392,23 @@ impl<T: Pixel> Content<T> {
                 hfov,
                 vertical: Vertical::Cylinder { h: height },
             } => (2, [w as f64, h as f64, hfov, height]),
+            Kind::Fisheye {
+                cx,
+                cy,
+                radius,
+                half,
+                ..
+            } => (3, [cx, cy, radius, half]),
+        }
+    }
+
+    /// World → the frame [`Content::lookup`]'s formulas take directions in: the orientation's
+    /// inverse, then for a dome master its turn from the zenith.
+    pub fn frame(&self) -> DMat3 {
+        let m = self.orientation.matrix().transpose();
+        match self.kind {
+            Kind::Fisheye { turn: Some(t), .. } => t * m,
+            _ => m,
         }
     }
 
@@ -254,7 +425,7 @@ impl<T: Pixel> Locate for Content<T> {
         let d = self.orientation.apply_inverse(d);
         let pad = PAD as f64;
         match self.kind {
-            Kind::Cube { n } => {
+            Kind::Cube { n, .. } => {
                 let (face, s, t) = cubemap::select(d);
                 let nf = n as f64;
                 let y0 = (face.index() * (n + 2 * PAD)) as f64;
@@ -291,6 +462,27 @@ impl<T: Pixel> Locate for Content<T> {
                 }
                 Some((u * w as f64 - 0.5 + pad, v * h as f64 - 0.5 + pad))
             }
+            Kind::Fisheye {
+                cx,
+                cy,
+                radius,
+                half,
+                turn,
+                ..
+            } => {
+                let d = turn.map_or(d, |t| t * d);
+                let rho = d.x.hypot(d.y);
+                let theta = rho.atan2(-d.z);
+                // The projection module's tolerance, so the rim of its own fisheye is covered.
+                if theta > half * (1.0 + 1e-12) {
+                    return None;
+                }
+                if rho == 0.0 {
+                    return Some((cx, cy));
+                }
+                let k = radius * theta / (half * rho);
+                Some((cx + k * d.x, cy - k * d.y))
+            }
         }
     }
 
@@ -300,7 +492,7 @@ impl<T: Pixel> Locate for Content<T> {
 
     #[inline]
     fn near_a_seam(&self, x: f64, y: f64, margin: f64) -> bool {
-        let Kind::Cube { n } = self.kind else {
+        let Kind::Cube { n, .. } = self.kind else {
             return false;
         };
         // Faces are stacked top to bottom, each in a border of PAD texels; `locate` gives
@@ -315,7 +507,7 @@ impl<T: Pixel> Locate for Content<T> {
 
     #[inline]
     fn locate_clear(&self, d: DVec3, margin: f64) -> Option<(f64, f64)> {
-        let Kind::Cube { n } = self.kind else {
+        let Kind::Cube { n, .. } = self.kind else {
             // Panoramas have no seams.
             return self.locate(d);
         };
@@ -333,10 +525,17 @@ impl<T: Pixel> Locate for Content<T> {
         Some((x, y + (face.index() * (n + 2 * PAD)) as f64))
     }
 
+    fn circle(&self) -> Option<[f64; 3]> {
+        match self.kind {
+            Kind::Fisheye { cx, cy, radius, .. } => Some([cx, cy, radius]),
+            _ => None,
+        }
+    }
+
     fn bounds(&self) -> Option<[f64; 4]> {
         match self.kind {
             Kind::Cube { .. } => None,
-            Kind::Panorama { w, h, .. } => {
+            Kind::Panorama { w, h, .. } | Kind::Fisheye { w, h, .. } => {
                 let pad = PAD as f64;
                 Some([
                     pad - 0.5,
@@ -347,6 +546,40 @@ impl<T: Pixel> Locate for Content<T> {
             }
         }
     }
+}
+
+/// An angular (equidistant) fisheye image: a fisheye lens's frame or, with a tilt, a dome
+/// master. Angles in degrees, positions in pixels from the image's top-left corner.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fisheye {
+    /// Field of view across the image circle, above 0 and at most 360 degrees.
+    pub fov: f64,
+    /// A dome master: the circle's centre at the zenith tilted forward by this many degrees
+    /// (±90), the front of the dome at the bottom of the image. `None`: a fisheye looking at −z
+    /// with up at the top of the image.
+    pub tilt: Option<f64>,
+    /// The circle's centre (default: the image centre).
+    pub centre: Option<[f64; 2]>,
+    /// The circle's radius (default: half the shorter side, the inscribed circle).
+    pub radius: Option<f64>,
+}
+
+impl Fisheye {
+    /// A 180° dome master filling its square image, untilted.
+    pub const DOMEMASTER: Fisheye = Fisheye {
+        fov: 180.0,
+        tilt: Some(0.0),
+        centre: None,
+        radius: None,
+    };
+
+    /// A 180° fisheye looking at −z, its circle inscribed.
+    pub const FISHEYE: Fisheye = Fisheye {
+        fov: 180.0,
+        tilt: None,
+        centre: None,
+        radius: None,
+    };
 }
 
 /// How a content image is laid out.
@@ -364,16 +597,23 @@ pub enum Format {
     /// A cylindrical panorama (seed 001): longitude linear across, height on the cylinder linear
     /// down.
     Cylindrical,
+    /// An angular fisheye looking at −z (180°, inscribed, unless [`Content::fisheye`] is told
+    /// otherwise).
+    Fisheye,
+    /// A dome master: a 180° angular fisheye whose centre is the zenith, front at the bottom.
+    Domemaster,
 }
 
 impl Format {
     /// Every format with its name, as `--content-format` spells it.
-    pub const NAMES: [(&'static str, Format); 5] = [
+    pub const NAMES: [(&'static str, Format); 7] = [
         ("cubemap", Format::Cubemap),
         ("cubemap-c3x2", Format::CubemapC3x2),
         ("cubemap-c6x1", Format::CubemapC6x1),
         ("equirect", Format::Equirect),
         ("cylindrical", Format::Cylindrical),
+        ("fisheye", Format::Fisheye),
+        ("domemaster", Format::Domemaster),
     ];
 
     /// The format of that name (see [`Format::NAMES`]); an error listing the known names otherwise.
@@ -397,7 +637,7 @@ impl Format {
             Format::Cubemap => Some(cubemap::Layout::Strip),
             Format::CubemapC3x2 => Some(cubemap::Layout::FfmpegC3x2),
             Format::CubemapC6x1 => Some(cubemap::Layout::FfmpegC6x1),
-            Format::Equirect | Format::Cylindrical => None,
+            _ => None,
         }
     }
 }
@@ -418,7 +658,25 @@ impl<T: Pixel> Content<T> {
                     "a cube map always covers every direction; the field of view is for panoramas",
                 ));
             }
-            return Ok(Content::cube(&layout.split(image)?));
+            let mut c = Content::cube(&layout.split(image)?);
+            if let Kind::Cube { layout: l, .. } = &mut c.kind {
+                *l = Some(layout);
+            }
+            return Ok(c);
+        }
+        let fisheye = match format {
+            Format::Fisheye => Some(Fisheye::FISHEYE),
+            Format::Domemaster => Some(Fisheye::DOMEMASTER),
+            _ => None,
+        };
+        if let Some(f) = fisheye {
+            if hfov.is_some() || vfov.is_some() {
+                return Err(Error::invalid(
+                    "content-hfov",
+                    "a fisheye's field of view is its image circle's (content-fov)",
+                ));
+            }
+            return Content::fisheye(image, &f);
         }
         let hfov = hfov.unwrap_or(360.0);
         let aspect = image.height as f64 / image.width as f64;

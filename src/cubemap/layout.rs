@@ -56,6 +56,12 @@ impl Layout {
         }
     }
 
+    /// The size (width, height) of the image this layout makes of faces `n` pixels square.
+    pub fn image_size(self, n: usize) -> (usize, usize) {
+        let (cols, rows) = self.grid();
+        (n * cols, n * rows)
+    }
+
     /// Splits a layout image into a cube map.
     pub fn split<T: Pixel>(self, image: &Raster<T>) -> Result<CubeMap<T>> {
         let (cols, rows) = self.grid();

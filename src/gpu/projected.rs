@@ -50,8 +50,7 @@ impl PanoramaPass {
             ));
         }
         let (kind, q) = p.content.lookup();
-        // World → panorama frame: the content orientation's inverse, its transpose.
-        let m = p.content.orientation().matrix().transpose();
+        let m = p.content.frame();
         let col = |k: usize| {
             let v = m.col(k);
             [v.x as f32, v.y as f32, v.z as f32, 0.0]

@@ -163,6 +163,8 @@ pub(crate) struct Sampler<'a, L: Locate> {
     nearest: bool,
     /// The content's [`Locate::bounds`].
     bounds: Option<[f64; 4]>,
+    /// The content's [`Locate::circle`].
+    circle: Option<[f64; 3]>,
 }
 
 impl<'a, L: Locate> Sampler<'a, L> {
@@ -194,6 +196,7 @@ impl<'a, L: Locate> Sampler<'a, L> {
             cells: Vec::new(),
             nearest,
             bounds: content.bounds(),
+            circle: content.circle(),
         };
         let (columns, rows) = (nodes(sw), nodes(sh));
         if !lattice || columns.len() < 4 || rows.len() < 4 {
@@ -410,6 +413,10 @@ impl<'a, L: Locate> Sampler<'a, L> {
             || self.bounds.is_some_and(|[x0, y0, x1, y1]| {
                 let near = |v: f64, lo: f64, hi: f64| v <= lo + BOUND || v >= hi - BOUND;
                 near(x, x0, x1) || near(y, y0, y1)
+            })
+            || self.circle.is_some_and(|[cx, cy, r]| {
+                let (dx, dy) = (x - cx, y - cy);
+                dx * dx + dy * dy >= (r - BOUND) * (r - BOUND)
             })
     }
 }

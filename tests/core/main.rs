@@ -9,6 +9,7 @@ mod calibration;
 mod exactness;
 mod export;
 mod failure_map;
+mod fisheye;
 mod fuzz;
 mod interop;
 mod lens;

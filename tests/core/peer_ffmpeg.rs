@@ -95,6 +95,40 @@ fn equirect_to_flat_90() {
     );
 }
 
+/// ffmpeg's fisheye input back to equirect. Its fisheye input, like its equirect input, puts
+/// the circle's rim on the centres of the edge pixels, so the circle is given explicitly:
+/// radius 127.5 pixels about (128, 128). Where its bilinear taps straddle the rim it reads the
+/// black around the circle and ours reads the rim repeated, so the last degree is left out.
+#[test]
+fn fisheye_180_to_equirect() {
+    let input = read_u8(&fixture("ffmpeg/equirect_to_fisheye_180.png"));
+    let f = omniwarp::content::Fisheye {
+        centre: Some([128.0, 128.0]),
+        radius: Some(127.5),
+        ..omniwarp::content::Fisheye::FISHEYE
+    };
+    let content = omniwarp::content::Content::fisheye(&input, &f).unwrap();
+    let theirs = read_u8(&fixture("ffmpeg/fisheye_to_equirect.png"));
+    let (w, h) = (theirs.width as u32, theirs.height as u32);
+    let v = view("equirect", params(Some(360.0), Some(180.0), None), w, h);
+    let ours = render(Warp::View(&v), &content, w, h, 1, Filter::Bilinear).unwrap();
+    let inside = |x: usize, y: usize| {
+        let d = Warp::View(&v)
+            .direction(x as f64 + 0.5, y as f64 + 0.5, w, h)
+            .unwrap();
+        d.x.hypot(d.y).atan2(-d.z).to_degrees() < 89.0
+    };
+    let masked = Raster::from_fn(w as usize, h as usize, |x, y| {
+        if inside(x, y) { ours.get(x, y) } else { [0; 4] }
+    });
+    compare(
+        "fisheye",
+        &masked,
+        &theirs,
+        fraction(w as usize, h as usize, inside),
+    );
+}
+
 fn our_cube(layout: Layout, face: u32) -> Raster<[u8; 4]> {
     let content = content(&fixture("ffmpeg/input_equirect.png"), Format::Equirect);
     let faces: Vec<_> = Face::ALL
