@@ -16,6 +16,7 @@ pub mod gpu;
 pub mod image_io;
 pub mod lens;
 pub mod limits;
+pub mod media;
 pub mod normalmap;
 pub mod projection;
 pub mod raster;

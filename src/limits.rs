@@ -50,6 +50,12 @@ pub const EXPORT_NODES: usize = 1 << 22;
 pub const EXPORT_BYTES: usize = 256 << 20;
 /// Content canvas pixels each way.
 pub const CANVAS_SIDE: u32 = 65535;
+/// A movie's or image sequence's frame, pixels each way: a 16K dome master.
+pub const MEDIA_SIDE: u64 = 16384;
+/// Frames of an image sequence (about 11 hours at 25 frames a second).
+pub const SEQUENCE_FRAMES: usize = 1_000_000;
+/// Outputs one run of a movie feeds (a rig's channels).
+pub const MEDIA_OUTPUTS: usize = CHANNELS;
 /// The smallest field of view a projection accepts, degrees: below it a content pixel is so
 /// small that pixel-sized tolerances ask for grids no export can hold.
 pub const MIN_FOV_DEG: f64 = 0.01;

@@ -12,7 +12,7 @@
 //! * anything else: the nearest edge texel (clamp).
 //!
 //! Apart from a cube's corners, every texel is a copy of one source pixel, so a new frame of a
-//! movie is laid out by the same rule, reading each pixel where it is ([`Atlas::refill`]).
+//! movie is laid out by the same rule, row by row, then the copies ([`Atlas::refill`]).
 
 use crate::cubemap::{self, CubeMap, Face};
 use crate::raster::{Pixel, Raster};
@@ -64,19 +64,13 @@ impl<T: Pixel> Atlas<T> {
     /// 360° panorama), clamped otherwise, and mirrored over the poles when `poles` (a full
     /// 360° × 180° equirect). An error for images under 2×2 pixels.
     pub fn panorama(image: &Raster<T>, wrap: bool, poles: bool) -> Result<Self> {
-        let rule = Rule::Panorama { wrap, poles };
-        let mut atlas = Atlas::sized(image.width, image.height)?;
-        atlas.refill(rule, image.width, image.height, |x, y| image.get(x, y));
-        Ok(atlas)
+        Atlas::laid_out(image, Rule::Panorama { wrap, poles })
     }
 
     /// A fisheye image with its border, the circle centred at (`cx`, `cy`) image pixels from
     /// the top-left corner with radius `radius` pixels.
     pub fn fisheye(image: &Raster<T>, cx: f64, cy: f64, radius: f64) -> Result<Self> {
-        let rule = Rule::Circle { cx, cy, radius };
-        let mut atlas = Atlas::sized(image.width, image.height)?;
-        atlas.refill(rule, image.width, image.height, |x, y| image.get(x, y));
-        Ok(atlas)
+        Atlas::laid_out(image, Rule::Circle { cx, cy, radius })
     }
 
     fn sized(w: usize, h: usize) -> Result<Self> {
@@ -94,35 +88,56 @@ impl<T: Pixel> Atlas<T> {
         })
     }
 
-    /// Lays out a `w` × `h` source whose pixel (x, y) is `pixel(x, y)` by `rule`, in place,
-    /// rows in parallel: a movie's next frame, converted from its own pixel format as it is
-    /// read.
+    /// Lays out a `w` × `h` source by `rule`, in place: `row(y, texels)` writes source row y
+    /// into the atlas (rows in parallel), then every texel the rule fills from elsewhere copies
+    /// the texel it names, by the index pairs [`Atlas::copies`] lists. A movie's next frame,
+    /// converted from its own pixel format as it is read.
     pub(super) fn refill(
         &mut self,
-        rule: Rule,
         w: usize,
         h: usize,
-        pixel: impl Fn(usize, usize) -> T + Sync,
+        copies: &[(u32, u32)],
+        row: impl Fn(usize, &mut [T]) + Sync,
     ) {
         debug_assert_eq!((self.width, self.height), (w + 2 * PAD, h + 2 * PAD));
         let pw = self.width;
-        self.data
+        self.data[PAD * pw..(PAD + h) * pw]
             .par_chunks_mut(pw)
             .enumerate()
-            .for_each(|(ay, row)| {
-                let y = ay as isize - PAD as isize;
-                let inside_rows = (0..h as isize).contains(&y);
-                for (ax, texel) in row.iter_mut().enumerate() {
-                    let x = ax as isize - PAD as isize;
-                    let (sx, sy) = match rule {
-                        Rule::Panorama { .. } if inside_rows && (0..w as isize).contains(&x) => {
-                            (x as usize, y as usize)
-                        }
-                        _ => rule.source(x, y, w, h),
-                    };
-                    *texel = pixel(sx, sy);
+            .for_each(|(y, texels)| row(y, &mut texels[PAD..PAD + w]));
+        for &(to, from) in copies {
+            self.data[to as usize] = self.data[from as usize];
+        }
+    }
+
+    /// The (texel, source texel) index pairs of a `w` × `h` source laid out by `rule`: every
+    /// texel that is not its own source pixel, with the texel holding that pixel. Sources read
+    /// by a copy are always their own (inside the image, inside the circle), so the order of the
+    /// copies does not matter.
+    pub(super) fn copies(rule: Rule, w: usize, h: usize) -> Vec<(u32, u32)> {
+        let (pw, ph) = (w + 2 * PAD, h + 2 * PAD);
+        let mut out = Vec::new();
+        for ay in 0..ph {
+            for ax in 0..pw {
+                let (x, y) = (ax as isize - PAD as isize, ay as isize - PAD as isize);
+                let (sx, sy) = rule.source(x, y, w, h);
+                if (sx as isize, sy as isize) != (x, y) {
+                    let from = (sy + PAD) * pw + sx + PAD;
+                    out.push(((ay * pw + ax) as u32, from as u32));
                 }
-            });
+            }
+        }
+        out
+    }
+
+    fn laid_out(image: &Raster<T>, rule: Rule) -> Result<Self> {
+        let (w, h) = (image.width, image.height);
+        let mut atlas = Atlas::sized(w, h)?;
+        let copies = Atlas::<T>::copies(rule, w, h);
+        atlas.refill(w, h, &copies, |y, row| {
+            row.copy_from_slice(&image.data[y * w..(y + 1) * w])
+        });
+        Ok(atlas)
     }
 }
 

@@ -34,6 +34,7 @@ use crate::error::{Error, Result, finite};
 use crate::projection::Orientation;
 use crate::raster::{Pixel, Raster, split};
 use glam::{DMat3, DVec3};
+use rayon::prelude::*;
 use std::f64::consts::PI;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,6 +82,8 @@ pub struct Content<T> {
     /// A cylindrical panorama looked up by seed 001's linear + residual split instead of
     /// exactly ([`Content::with_residual_split`]).
     split: Option<std::sync::Arc<residual::ResidualSplit>>,
+    /// The atlas texels a new frame fills by copying ([`Content::refill`]), listed once.
+    copies: std::sync::OnceLock<std::sync::Arc<Vec<(u32, u32)>>>,
 }
 
 /// Where a direction falls in the atlas: continuous texel coordinates, integers at texel
@@ -152,6 +155,7 @@ impl<T: Pixel> Content<T> {
             },
             orientation: Orientation::default(),
             split: None,
+            copies: Default::default(),
         }
     }
 
@@ -171,6 +175,7 @@ impl<T: Pixel> Content<T> {
             },
             orientation: Orientation::default(),
             split: None,
+            copies: Default::default(),
         })
     }
 
@@ -197,6 +202,7 @@ impl<T: Pixel> Content<T> {
             },
             orientation: Orientation::default(),
             split: None,
+            copies: Default::default(),
         })
     }
 
@@ -250,40 +256,27 @@ impl<T: Pixel> Content<T> {
             },
             orientation: Orientation::default(),
             split: None,
+            copies: Default::default(),
         })
     }
 
     /// Takes the pixels of a new frame of the same size and layout, keeping the geometry (and
-    /// so every plan made for it): a movie's frame loop. `pixel(x, y)` reads pixel (x, y) of
-    /// the `size` = (width, height) frame, converting it from the frame's own pixel format as it
-    /// goes; an error if the size differs from the first frame's, or for a cube map not read
-    /// from one image.
+    /// so every plan made for it): a movie's frame loop. `row(y, pixels)` writes row y of the
+    /// `size` = (width, height) frame, converting it from the frame's own pixel format as it
+    /// goes (rows in parallel); an error if the size differs from the first frame's, or for a
+    /// cube map not read from one image.
     pub fn refill(
         &mut self,
         size: (usize, usize),
-        pixel: impl Fn(usize, usize) -> T + Sync,
+        row: impl Fn(usize, &mut [T]) + Sync,
     ) -> Result<()> {
-        let same = |w: usize, h: usize| -> Result<()> {
-            if (w, h) != size {
-                return Err(Error::invalid(
-                    "content",
-                    format!(
-                        "a frame is {}×{} pixels where the first was {w}×{h}",
-                        size.0, size.1
-                    ),
-                ));
-            }
-            Ok(())
-        };
-        match self.kind {
+        let (w, h, rule) = match self.kind {
             Kind::Cube { layout, n } => {
                 let layout = layout.ok_or_else(|| {
                     Error::invalid("content", "this cube map was not read from one image")
                 })?;
                 let (w, h) = layout.image_size(n);
-                same(w, h)?;
-                let image = Raster::from_fn(w, h, pixel);
-                self.atlas = Atlas::cube(&layout.split(&image)?);
+                (w, h, None)
             }
             Kind::Panorama {
                 w,
@@ -291,12 +284,10 @@ impl<T: Pixel> Content<T> {
                 hfov,
                 vertical,
             } => {
-                same(w, h)?;
                 let full = (hfov - 2.0 * PI).abs() < 1e-12;
                 let poles = full
                     && matches!(vertical, Vertical::Equirect { vfov } if (vfov - PI).abs() < 1e-12);
-                self.atlas
-                    .refill(Rule::Panorama { wrap: full, poles }, w, h, pixel);
+                (w, h, Some(Rule::Panorama { wrap: full, poles }))
             }
             Kind::Fisheye {
                 w,
@@ -306,15 +297,43 @@ impl<T: Pixel> Content<T> {
                 radius,
                 ..
             } => {
-                same(w, h)?;
                 let pad = PAD as f64;
                 let rule = Rule::Circle {
                     cx: cx + 0.5 - pad,
                     cy: cy + 0.5 - pad,
                     radius,
                 };
-                self.atlas.refill(rule, w, h, pixel);
+                (w, h, Some(rule))
             }
+        };
+        if (w, h) != size {
+            return Err(Error::invalid(
+                "content",
+                format!(
+                    "a frame is {}×{} pixels where the first was {w}×{h}",
+                    size.0, size.1
+                ),
+            ));
+        }
+        match (self.kind, rule) {
+            (Kind::Cube { layout, .. }, _) => {
+                let mut image = Raster::new(w, h);
+                image
+                    .data
+                    .par_chunks_mut(w)
+                    .enumerate()
+                    .for_each(|(y, r)| row(y, r));
+                let layout = layout.expect("checked above");
+                self.atlas = Atlas::cube(&layout.split(&image)?);
+            }
+            (_, Some(rule)) => {
+                let copies = self
+                    .copies
+                    .get_or_init(|| std::sync::Arc::new(Atlas::<T>::copies(rule, w, h)))
+                    .clone();
+                self.atlas.refill(w, h, &copies, row);
+            }
+            (_, None) => unreachable!("panoramas and fisheyes have a rule"),
         }
         Ok(())
     }

@@ -6,5 +6,6 @@ mod common;
 
 mod cli;
 mod house;
+mod movie;
 mod readme;
 mod rig;

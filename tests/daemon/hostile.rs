@@ -1541,6 +1541,7 @@ fn the_limits_are_documented_where_users_read_them() {
         l::EXPORT_NODES.to_string(),
         l::FEATURE_VALUE.to_string(),
         l::CAPTURE_SLOTS.to_string(),
+        l::MEDIA_SIDE.to_string(),
         l::MESHES.to_string(),
         l::PLAN_PICTURE_WIDTH[1].to_string(),
         l::PLAN_STEP[0].to_string(),

@@ -2,11 +2,11 @@
 //! channel's warp (with its blend), or a 3D scene through a projection on the GPU (wgpu;
 //! lavapipe where there is no GPU) or the CPU.
 
-use super::args::{
+use crate::cli::args::{
     ContentArgs, ContentLookup, FilterArg, ProjectionArgs, check_ext, filter, flag_error,
     parse_size, parse_vec3,
 };
-use super::io::{
+use crate::cli::io::{
     AnyContent, AnyRaster, channel, is_exr, load_content, read_rig, read_tiles, write_output,
 };
 use anyhow::{Context, Result, bail};
@@ -26,6 +26,8 @@ use omniwarp::scene::ppp::{Pieces, Tolerance};
 use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
 use std::path::{Path, PathBuf};
+
+mod movie;
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -67,15 +69,29 @@ pub struct RenderArgs {
     #[arg(long, value_parser = parse_size)]
     size: Option<(u32, u32)>,
     /// Output image: .png (8-bit RGBA) or .exr (32-bit float RGBA). Alpha is 0 where nothing
-    /// is shown.
-    #[arg(long)]
-    out: PathBuf,
+    /// is shown. With a movie or sequence as content: a movie (.mp4, .mov, .mkv, …) or a
+    /// sequence pattern (out-%05d.png or .exr); with --rig, `{channel}` in the name writes one
+    /// per channel (all of them, or --channel).
+    #[arg(long, required_unless_present = "out_dir")]
+    out: Option<PathBuf>,
+    /// With --rig and a movie or sequence as content: one movie per channel, DIR/<id>.mp4
+    /// (as --out DIR/{channel}.mp4).
+    #[arg(long, requires = "rig", conflicts_with = "out")]
+    out_dir: Option<PathBuf>,
+    #[command(flatten)]
+    movie: movie::MovieArgs,
     #[command(flatten)]
     scene: SceneArgs,
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    check_ext(&a.out, &["png", "exr"])?;
+    let media_in = a.content.content.as_deref().is_some_and(movie::is_media);
+    let media_out = a.out.as_deref().is_some_and(movie::is_media) || a.out_dir.is_some();
+    if media_in || media_out {
+        return render_movie(&a);
+    }
+    let out = a.out.clone().context("--out: needed")?;
+    check_ext(&out, &["png", "exr"])?;
     if let Some(spec) = &a.scene.scene {
         let (w, h) = a.size.context("--size: needed with --scene")?;
         let view = a.projection.view(w, h)?;
@@ -86,10 +102,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
             }
             None => None,
         };
-        return render_scene(spec, &a.scene, panorama, &view, (w, h), &a.out);
+        return render_scene(spec, &a.scene, panorama, &view, (w, h), &out);
     }
     if let (Some(renderer), Some(rig), Some(id)) = (a.scene.renderer, &a.rig, &a.channel) {
-        return render_channel_on_wall(&a, renderer, rig, id);
+        return render_channel_on_wall(&a, renderer, rig, id, &out);
     }
     if let Some(RendererArg::Gpu) = a.scene.renderer {
         bail!(
@@ -146,7 +162,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
             Warp::View(&view)
         }
     };
-    let content = load_content(&a.content, is_exr(&a.out))?;
+    let content = load_content(&a.content, is_exr(&out))?;
     let (ss, f) = (a.supersample, filter(a.filter));
     let effect = features.as_ref().map(|f| f.f());
     let img = match &content {
@@ -171,7 +187,90 @@ pub fn run(a: RenderArgs) -> Result<()> {
             AnyRaster::F32(r)
         }
     };
-    write_output(&a.out, img, &[])
+    write_output(&out, img, &[])
+}
+
+/// A movie or an image sequence through the warp: one output, or one per rig channel.
+fn render_movie(a: &RenderArgs) -> Result<()> {
+    if a.scene.scene.is_some() || a.scene.renderer.is_some() {
+        bail!("--scene: movies and sequences are warped as content on the CPU path");
+    }
+    if a.tiles.is_some() {
+        bail!("--tiles: a movie goes through a projection, a normal map or a rig");
+    }
+    let template = match (&a.out, &a.out_dir) {
+        (_, Some(dir)) => dir.join("{channel}.mp4"),
+        (Some(out), None) => out.clone(),
+        (None, None) => bail!("--out: needed"),
+    };
+    let per_channel = template.to_string_lossy().contains("{channel}");
+    let mut outputs = Vec::new();
+    match &a.rig {
+        Some(rig) if per_channel || a.channel.is_some() => {
+            let ids = match &a.channel {
+                Some(id) => vec![id.clone()],
+                None => read_rig(rig)?
+                    .channels
+                    .iter()
+                    .map(|c| c.id.clone())
+                    .collect(),
+            };
+            for id in ids {
+                let (map, gains) = render_inputs(rig, &id, a.gamma, a.project_from)?;
+                outputs.push(movie::Output {
+                    path: PathBuf::from(template.to_string_lossy().replace("{channel}", &id)),
+                    source: movie::Source::Map(map),
+                    gains: Some(gains),
+                });
+            }
+        }
+        _ if per_channel => bail!("--out: {{channel}} names one output per rig channel (--rig)"),
+        Some(rig) => {
+            let (w, h) = a
+                .size
+                .context("--size: needed for the eye's view of a rig (--rig without --channel)")?;
+            if a.projection.projection.is_none() {
+                bail!("--projection: needed for the eye's view of a rig (or give --channel)");
+            }
+            let rig = read_rig(rig)?;
+            let centre = rig
+                .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
+                .map_err(flag_error)?;
+            let view = a.projection.view(w, h)?;
+            let map = rig.eye_view(&view, w, h, centre).map_err(flag_error)?;
+            outputs.push(movie::Output {
+                path: template,
+                source: movie::Source::Map(map),
+                gains: None,
+            });
+        }
+        None if a.project_from.is_some() => {
+            bail!("--project-from: needs a surface to project onto: --rig (its wall)")
+        }
+        None => {
+            let source = match &a.normal_map {
+                Some(p) => movie::Source::Map(NormalMap::read(p).context("--normal-map")?),
+                None => {
+                    let (w, h) = a
+                        .size
+                        .context("--size: needed when rendering through a projection")?;
+                    movie::Source::View(a.projection.view(w, h)?, (w, h))
+                }
+            };
+            outputs.push(movie::Output {
+                path: template,
+                source,
+                gains: None,
+            });
+        }
+    }
+    movie::run(movie::Job {
+        content: &a.content,
+        outputs,
+        movie: &a.movie,
+        supersample: a.supersample,
+        filter: filter(a.filter),
+    })
 }
 
 /// A channel's warp map (for a panorama projected from `project_from`, if given) and its blend
@@ -226,6 +325,7 @@ fn render_channel_on_wall(
     renderer: RendererArg,
     path: &Path,
     id: &str,
+    out: &Path,
 ) -> Result<()> {
     if a.supersample != 1 || !matches!(a.filter, FilterArg::Bilinear) {
         bail!("--renderer: the scene renderers filter bilinearly, one sample per pixel");
@@ -251,7 +351,7 @@ fn render_channel_on_wall(
     let (mut img, report) = r.frame_map(&warp.map, &opts).map_err(flag_error)?;
     eprintln!("{}: cube faces at {}²", r.describe(), report.face);
     apply_gains(&mut img, &signal_mask(&rig, ch, &warp.points, a.gamma)?)?;
-    write_output(&a.out, AnyRaster::U8(img), &[])
+    write_output(out, AnyRaster::U8(img), &[])
 }
 
 #[derive(Clone, Copy, ValueEnum)]
