@@ -9,7 +9,7 @@ use crate::{Error, Result};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
-use std::sync::mpsc::{Receiver, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 /// One decoded content frame, as it came through the pipe or off the disk.
@@ -236,6 +236,7 @@ impl Input {
                 Ok(Frames {
                     rx,
                     thread: Some(thread),
+                    back: None,
                 })
             }
             Input::Movie { path, info } => {
@@ -255,11 +256,16 @@ impl Input {
                 let mut stdout = child.stdout.take().expect("piped");
                 let stderr = drain(child.stderr.take().expect("piped"));
                 let (path, info) = (path.clone(), info.clone());
+                let (back, spare) = sync_channel::<Vec<u8>>(3);
                 let thread = std::thread::spawn(move || {
                     let mut child = Reaped(child);
                     let mut count = 0u64;
                     loop {
-                        let mut buf = vec![0u8; len];
+                        let mut buf = spare
+                            .try_recv()
+                            .ok()
+                            .filter(|b| b.len() == len)
+                            .unwrap_or_else(|| vec![0u8; len]);
                         match read_full(&mut stdout, &mut buf) {
                             Ok(n) if n == len => {
                                 count += 1;
@@ -302,6 +308,7 @@ impl Input {
                 Ok(Frames {
                     rx,
                     thread: Some(thread),
+                    back: Some(back),
                 })
             }
         }
@@ -414,6 +421,17 @@ impl Drop for Reaped {
 pub struct Frames {
     rx: Receiver<Result<Frame>>,
     thread: Option<JoinHandle<()>>,
+    /// Hands a used frame's bytes back to the decoder (a 4K frame is 11 MB).
+    back: Option<SyncSender<Vec<u8>>>,
+}
+
+impl Frames {
+    /// Gives a frame that has been laid into the atlas back, for its bytes to be reused.
+    pub fn recycle(&self, frame: Frame) {
+        if let (Some(back), Frame::Yuv420(b)) = (&self.back, frame) {
+            let _ = back.try_send(b);
+        }
+    }
 }
 
 impl Iterator for Frames {

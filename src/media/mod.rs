@@ -27,6 +27,10 @@ use crate::Error;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// The output that discards its frames after packing them as for a 4:2:0 movie: what the
+/// decode and the warp alone sustain (as ffmpeg's `-f null -`).
+pub const NULL: &str = "null:";
+
 /// Extensions read as movies.
 pub const MOVIE_EXTENSIONS: [&str; 10] = [
     "mp4", "mov", "mkv", "avi", "mxf", "webm", "m4v", "nut", "mpg", "ts",
@@ -35,7 +39,7 @@ pub const MOVIE_EXTENSIONS: [&str; 10] = [
 /// Whether `path` names a movie (by its extension) or an image sequence (a `%d`-style
 /// pattern): content for [`transcode`] rather than a still image.
 pub fn is_media(path: &Path) -> bool {
-    Sequence::is_pattern(path) || is_movie(path)
+    Sequence::is_pattern(path) || is_movie(path) || path.as_os_str() == NULL
 }
 
 /// Whether `path` has a movie's extension.

@@ -126,6 +126,9 @@ pub(super) struct Carry {
 pub(super) struct Sink {
     pub pipe: Pipe,
     tx: Option<SyncSender<Packet>>,
+    /// Byte buffers the writer is done with, for the next frames (a 4K frame is 12 MB: a fresh
+    /// one each frame costs its page faults).
+    spare: Receiver<Vec<u8>>,
     thread: Option<JoinHandle<Result<()>>>,
     /// The movie's temporary file and its final name.
     movie: Option<(PathBuf, PathBuf)>,
@@ -158,6 +161,9 @@ impl Sink {
         carry: &Carry,
     ) -> Result<Sink> {
         let path = &spec.path;
+        if path.as_os_str() == super::NULL {
+            return Ok(Self::null());
+        }
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e))?;
         }
@@ -284,17 +290,44 @@ impl Sink {
         let stdin = child.stdin.take().expect("piped");
         let stderr = drain(child.stderr.take().expect("piped"));
         let (tx, rx) = sync_channel::<Packet>(2);
+        let (back, spare) = sync_channel::<Vec<u8>>(4);
         let out = path.clone();
         let thread = std::thread::spawn(move || {
             let child = Reaped(child);
-            encode(rx, stdin, child, stderr, &out)
+            encode(rx, &back, stdin, child, stderr, &out)
         });
         Ok(Sink {
             pipe,
             tx: Some(tx),
+            spare,
             thread: Some(thread),
             movie: Some((tmp, path.clone())),
         })
+    }
+
+    /// Frames packed as for a 4:2:0 movie, then dropped: what the warp alone sustains.
+    fn null() -> Sink {
+        let (tx, rx) = sync_channel::<Packet>(2);
+        let (back, spare) = sync_channel::<Vec<u8>>(4);
+        let thread = std::thread::spawn(move || {
+            for p in rx {
+                match p {
+                    Packet::End => return Ok(()),
+                    Packet::Bytes(b) => {
+                        let _ = back.try_send(b);
+                    }
+                    _ => {}
+                }
+            }
+            Err(Error::Cancelled)
+        });
+        Sink {
+            pipe: Pipe::Yuv420,
+            tx: Some(tx),
+            spare,
+            thread: Some(thread),
+            movie: None,
+        }
     }
 
     fn sequence(pattern: PathBuf, pipe: Pipe, first: u64, half: bool) -> Sink {
@@ -303,9 +336,15 @@ impl Sink {
         Sink {
             pipe,
             tx: Some(tx),
+            spare: sync_channel(0).1,
             thread: Some(thread),
             movie: None,
         }
+    }
+
+    /// A byte buffer for the next frame: one the writer is done with, or a new one.
+    pub fn buffer(&self) -> Vec<u8> {
+        self.spare.try_recv().unwrap_or_default()
     }
 
     /// Hands a frame to the writer; an error if the writer has stopped (its reason).
@@ -360,6 +399,7 @@ impl Drop for Sink {
 
 fn encode(
     rx: Receiver<Packet>,
+    back: &SyncSender<Vec<u8>>,
     mut stdin: ChildStdin,
     mut child: Reaped,
     stderr: JoinHandle<Vec<u8>>,
@@ -379,6 +419,7 @@ fn encode(
             failed = Some(e);
             break;
         }
+        let _ = back.try_send(bytes);
     }
     drop(stdin);
     if !complete && failed.is_none() {

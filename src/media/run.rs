@@ -24,6 +24,8 @@ pub trait Sample: Pixel {
     fn to_rgba8(self) -> [u8; 4];
     /// To float RGBA, 0–1.
     fn to_unit(self) -> [f32; 4];
+    /// The pixels as 8-bit RGBA without a conversion, where that is what they are.
+    fn bytes(pixels: &[Self]) -> Option<&[[u8; 4]]>;
 }
 
 impl Sample for [u8; 4] {
@@ -41,6 +43,9 @@ impl Sample for [u8; 4] {
     fn to_unit(self) -> [f32; 4] {
         self.map(|c| f32::from(c) / 255.0)
     }
+    fn bytes(pixels: &[Self]) -> Option<&[[u8; 4]]> {
+        Some(pixels)
+    }
 }
 
 impl Sample for [f32; 4] {
@@ -57,6 +62,9 @@ impl Sample for [f32; 4] {
     }
     fn to_unit(self) -> [f32; 4] {
         self
+    }
+    fn bytes(_: &[Self]) -> Option<&[[u8; 4]]> {
+        None
     }
 }
 
@@ -183,18 +191,20 @@ pub fn transcode<T: Sample>(
             fill(&mut content, &frame, (w, h), &decoder)?;
             lap(&mut summary.fill);
         }
+        frames.recycle(frame);
         for ((t, buf), sink) in targets.iter().zip(&mut buffers).zip(&mut sinks) {
             t.plan.render_into(content.atlas(), buf)?;
             if let (Some(g), false) = (&t.gains, native) {
                 apply_gains(buf, g)?;
             }
             lap(&mut summary.warp);
+            let bytes = sink.buffer();
             let packet = match sink.pipe {
                 Pipe::Yuv420 if native => {
-                    Packet::Bytes(pack_native(buf, t.gains.as_deref(), black))
+                    Packet::Bytes(pack_native(buf, t.gains.as_deref(), black, bytes))
                 }
-                Pipe::Yuv420 => Packet::Bytes(pack_yuv(buf, &encoder)),
-                Pipe::Rgba => Packet::Bytes(pack_rgba(buf)),
+                Pipe::Yuv420 => Packet::Bytes(pack_yuv(buf, &encoder, bytes)),
+                Pipe::Rgba => Packet::Bytes(pack_rgba(buf, bytes)),
                 Pipe::Png => Packet::U8(buf.map(T::to_rgba8)),
                 Pipe::Exr => Packet::F32(buf.map(T::to_unit)),
             };
@@ -313,56 +323,106 @@ fn fill_native<T: Sample>(
 
 /// 4:2:0 planes of a frame warped in Y′CbCr: luma as it is, chroma averaged over each 2×2
 /// block, black where nothing is shown, the blend's gain applied about black. Row pairs in
-/// parallel, each plane in a loop of its own that the compiler can vectorise.
-fn pack_native<T: Sample>(img: &Raster<T>, gains: Option<&[f32]>, black: u8) -> Vec<u8> {
+/// parallel; without a blend, plain loops over bytes that the compiler vectorises.
+fn pack_native<T: Sample>(
+    img: &Raster<T>,
+    gains: Option<&[f32]>,
+    black: u8,
+    out: Vec<u8>,
+) -> Vec<u8> {
     let (w, h) = (img.width, img.height);
     let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-    let mut out = vec![0u8; super::yuv::frame_len(w, h)];
+    let mut out = sized(out, super::yuv::frame_len(w, h));
     let (luma, chroma) = out.split_at_mut(w * h);
     let (cb, cr) = chroma.split_at_mut(cw * ch);
-    let black = i32::from(black);
+    if let (None, Some(data)) = (gains, T::bytes(&img.data)) {
+        pack_plain(data, w, h, black, luma, cb, cr);
+        return out;
+    }
+    // A pixel as (Y′, Cb, Cr, shown): gained about black where there is a blend.
+    let code = |i: usize| -> [u8; 4] {
+        let p = img.data[i].to_rgba8();
+        match gains {
+            None => p,
+            Some(g) => {
+                let g = g[i].clamp(0.0, 1.0);
+                let about = |c: u8, zero: u8| {
+                    (f32::from(zero) + (f32::from(c) - f32::from(zero)) * g).round() as u8
+                };
+                [about(p[0], black), about(p[1], 128), about(p[2], 128), p[3]]
+            }
+        }
+    };
     luma.par_chunks_mut(2 * w)
         .zip(cb.par_chunks_mut(cw).zip(cr.par_chunks_mut(cw)))
         .enumerate()
         .for_each(|(j, (ys, (us, vs)))| {
-            // The pair's pixels as (Y′, Cb, Cr) code values in 1/256ths, gained, black where
-            // empty; the second row repeats the first at an odd height's end.
             let rows = [2 * j, (2 * j + 1).min(h - 1)];
-            let mut q = [vec![[0i32; 3]; w], vec![[0i32; 3]; w]];
-            for (k, &y) in rows.iter().enumerate() {
-                let src = &img.data[y * w..(y + 1) * w];
-                let g = gains.map(|g| &g[y * w..(y + 1) * w]);
-                for (x, (o, p)) in q[k].iter_mut().zip(src).enumerate() {
-                    let [l, u, v, a] = p.to_rgba8();
-                    let gain = match g {
-                        _ if a == 0 => 0,
-                        Some(g) => (g[x].clamp(0.0, 1.0) * 256.0 + 0.5) as i32,
-                        None => 256,
-                    };
-                    *o = [
-                        (black << 8) + (i32::from(l) - black) * gain,
-                        (128 << 8) + (i32::from(u) - 128) * gain,
-                        (128 << 8) + (i32::from(v) - 128) * gain,
-                    ];
+            let px: [Vec<[u8; 4]>; 2] = rows.map(|y| (y * w..(y + 1) * w).map(code).collect());
+            for (row, src) in ys.chunks_exact_mut(w).zip(&px) {
+                for (o, p) in row.iter_mut().zip(src) {
+                    *o = if p[3] == 0 { black } else { p[0] };
                 }
             }
-            for (k, row) in ys.chunks_exact_mut(w).enumerate() {
-                for (o, p) in row.iter_mut().zip(&q[k]) {
-                    *o = ((p[0] + 128) >> 8).clamp(0, 255) as u8;
-                }
-            }
-            for x in 0..cw {
+            let chroma = |p: [u8; 4], c: usize| if p[3] == 0 { 128 } else { u16::from(p[c]) };
+            for (x, (u, v)) in us.iter_mut().zip(vs.iter_mut()).enumerate() {
                 let (a, b) = (2 * x, (2 * x + 1).min(w - 1));
-                let sum = |c: usize| q[0][a][c] + q[0][b][c] + q[1][a][c] + q[1][b][c];
-                us[x] = ((sum(1) + 512) >> 10).clamp(0, 255) as u8;
-                vs[x] = ((sum(2) + 512) >> 10).clamp(0, 255) as u8;
+                let q = [px[0][a], px[0][b], px[1][a], px[1][b]];
+                let mean =
+                    |c: usize| ((q.iter().map(|&p| chroma(p, c)).sum::<u16>() + 2) >> 2) as u8;
+                *u = mean(1);
+                *v = mean(2);
             }
         });
     out
 }
 
-fn pack_rgba<T: Sample>(img: &Raster<T>) -> Vec<u8> {
-    let mut out = vec![0u8; img.data.len() * 4];
+/// [`pack_native`] of 8-bit pixels without a blend: plain loops over bytes, no copies.
+fn pack_plain(
+    data: &[[u8; 4]],
+    w: usize,
+    h: usize,
+    black: u8,
+    luma: &mut [u8],
+    cb: &mut [u8],
+    cr: &mut [u8],
+) {
+    let cw = w.div_ceil(2);
+    luma.par_chunks_mut(2 * w)
+        .zip(cb.par_chunks_mut(cw).zip(cr.par_chunks_mut(cw)))
+        .enumerate()
+        .for_each(|(j, (ys, (us, vs)))| {
+            let r0 = &data[2 * j * w..(2 * j + 1) * w];
+            let y1 = (2 * j + 1).min(h - 1);
+            let r1 = &data[y1 * w..(y1 + 1) * w];
+            for (row, src) in ys.chunks_exact_mut(w).zip([r0, r1]) {
+                for (o, p) in row.iter_mut().zip(src) {
+                    *o = if p[3] == 0 { black } else { p[0] };
+                }
+            }
+            let c = |p: &[u8; 4], k: usize| if p[3] == 0 { 128 } else { u16::from(p[k]) };
+            for (((u, v), a), b) in us
+                .iter_mut()
+                .zip(vs.iter_mut())
+                .zip(r0.chunks(2))
+                .zip(r1.chunks(2))
+            {
+                // An odd width's last block repeats its column.
+                let (a1, b1) = (&a[a.len() - 1], &b[b.len() - 1]);
+                let mean = |k| ((c(&a[0], k) + c(a1, k) + c(&b[0], k) + c(b1, k) + 2) >> 2) as u8;
+                *u = mean(1);
+                *v = mean(2);
+            }
+        });
+}
+
+/// `buf` as a buffer of `len` bytes, every one of which the caller overwrites.
+fn sized(buf: Vec<u8>, len: usize) -> Vec<u8> {
+    if buf.len() == len { buf } else { vec![0; len] }
+}
+
+fn pack_rgba<T: Sample>(img: &Raster<T>, out: Vec<u8>) -> Vec<u8> {
+    let mut out = sized(out, img.data.len() * 4);
     out.par_chunks_mut(4 * img.width)
         .zip(img.data.par_chunks(img.width))
         .for_each(|(o, row)| {
@@ -376,11 +436,11 @@ fn pack_rgba<T: Sample>(img: &Raster<T>) -> Vec<u8> {
 /// 4:2:0 planes of a warped frame: luma per pixel, chroma from the sum of each 2×2 block
 /// (odd sizes repeat the last row or column into it). Row pairs in parallel; each plane's loop
 /// is plain enough for the compiler to vectorise.
-fn pack_yuv<T: Sample>(img: &Raster<T>, e: &Encoder) -> Vec<u8> {
+fn pack_yuv<T: Sample>(img: &Raster<T>, e: &Encoder, out: Vec<u8>) -> Vec<u8> {
     let (w, h) = (img.width, img.height);
     let cw = w.div_ceil(2);
     let ch = h.div_ceil(2);
-    let mut out = vec![0u8; super::yuv::frame_len(w, h)];
+    let mut out = sized(out, super::yuv::frame_len(w, h));
     let (luma, chroma) = out.split_at_mut(w * h);
     let (cb, cr) = chroma.split_at_mut(cw * ch);
     luma.par_chunks_mut(2 * w)
@@ -421,4 +481,39 @@ fn pack_yuv<T: Sample>(img: &Raster<T>, e: &Encoder) -> Vec<u8> {
             }
         });
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(w: usize, h: usize) -> Raster<[u8; 4]> {
+        Raster::from_fn(w, h, |x, y| {
+            let a = if (x * 7 + y * 3) % 11 == 0 { 0 } else { 255 };
+            [
+                (x * 13 + y) as u8,
+                (x * 5 + 90) as u8,
+                (y * 9 + 20) as u8,
+                a,
+            ]
+        })
+    }
+
+    /// The byte loops give what the general path gives (float pixels take it), at even and odd
+    /// sizes; empty pixels are black; a blend's gain scales about black and about 128.
+    #[test]
+    fn packing_in_ycbcr_is_the_same_on_both_paths_and_gains_scale_about_black() {
+        for (w, h) in [(8, 6), (7, 5)] {
+            let bytes = frame(w, h);
+            let floats = bytes.map(|p| p.map(|c| f32::from(c) / 255.0));
+            let a = pack_native(&bytes, None, 16, Vec::new());
+            let b = pack_native(&floats, None, 16, Vec::new());
+            assert_eq!(a, b, "{w}×{h}");
+            let empty = (0..w * h).find(|&i| bytes.data[i][3] == 0).unwrap();
+            assert_eq!(a[empty], 16);
+        }
+        let one = Raster::from_fn(2, 2, |_, _| [216u8, 200, 56, 255]);
+        let packed = pack_native(&one, Some(&[0.5; 4]), 16, Vec::new());
+        assert_eq!(packed, vec![116, 116, 116, 116, 164, 92]);
+    }
 }

@@ -120,6 +120,14 @@ fn a_sequence_through_the_cylinder_equals_each_frames_still() {
     assert_eq!(probe(d, "out.nut", "v", "r_frame_rate"), "15/1");
     let outs = frames(d, "out.nut", "out");
     assert_eq!(outs.len(), 12);
+    // The throughput sink warps every frame and writes nothing.
+    let files = || std::fs::read_dir(d).unwrap().count();
+    let before = files();
+    let last = args.len() - 1;
+    args[last] = "null:";
+    let err = ok(d, "omniwarp", &args);
+    assert!(err.contains("12 frames"), "{err}");
+    assert_eq!(files(), before);
     for (k, (src, out)) in sources.iter().zip(&outs).enumerate() {
         let mut args = vec![
             "render",

@@ -28,6 +28,8 @@ pub mod serve;
 pub mod store;
 #[cfg(feature = "bench")]
 pub mod tiles;
+#[cfg(feature = "bench")]
+pub mod video;
 pub mod warp;
 
 use anyhow::Result;
@@ -73,6 +75,11 @@ pub enum BenchCommand {
     /// noise); decoding and calibration measured against the truth.
     #[cfg(feature = "bench")]
     Camera(camera::CameraBenchArgs),
+    /// Movies against ffmpeg: a 4K equirect clip to a 4K cylinder (warp only, and end to end
+    /// with the same x264 settings) against v360, and a 4096² dome master to the five-projector
+    /// dome (one decode, blended) against five `remap` runs; PSNR against the exact render.
+    #[cfg(feature = "bench")]
+    Video(video::VideoBenchArgs),
     /// Calibration against point count (50, 500, 5000) and lens model.
     #[cfg(feature = "bench")]
     Calibrate,
@@ -110,6 +117,8 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Store(a) => store::run(a),
         #[cfg(feature = "bench")]
         BenchCommand::Camera(a) => camera::run(a),
+        #[cfg(feature = "bench")]
+        BenchCommand::Video(a) => video::run_bench(a),
         #[cfg(feature = "bench")]
         BenchCommand::Calibrate => calibrate::run(),
         #[cfg(feature = "bench")]

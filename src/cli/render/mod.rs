@@ -71,7 +71,7 @@ pub struct RenderArgs {
     /// Output image: .png (8-bit RGBA) or .exr (32-bit float RGBA). Alpha is 0 where nothing
     /// is shown. With a movie or sequence as content: a movie (.mp4, .mov, .mkv, …) or a
     /// sequence pattern (out-%05d.png or .exr); with --rig, `{channel}` in the name writes one
-    /// per channel (all of them, or --channel).
+    /// per channel (all of them, or --channel). `null:` warps and discards: the throughput.
     #[arg(long, required_unless_present = "out_dir")]
     out: Option<PathBuf>,
     /// With --rig and a movie or sequence as content: one movie per channel, DIR/<id>.mp4
