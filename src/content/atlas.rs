@@ -7,8 +7,9 @@
 //!   meet, the mean of the three candidates;
 //! * full panoramas: the columns of the other side (wrap-around); over the poles of a full
 //!   equirectangular image, the row mirrored across the pole half a turn round;
-//! * a fisheye's image circle: outside it, the texel on the same radius one texel inside the
-//!   rim, so that filtering at the rim reads the picture and not the black around the circle;
+//! * a fisheye's image circle: outside it, the texel on the same radius a texel and a half
+//!   inside the rim, so that filtering at the rim reads the picture and not the black around
+//!   the circle;
 //! * anything else: the nearest edge texel (clamp).
 //!
 //! Apart from a cube's corners, every texel is a copy of one source pixel, so a new frame of a
@@ -172,8 +173,11 @@ impl Rule {
                 if r2 <= inner * inner {
                     return clamp(x, y);
                 }
-                // Pulled in along its radius to the last pixel wholly inside the circle.
-                let k = (radius - 1.0).max(0.0) / r2.sqrt();
+                // Pulled in along its radius to a pixel wholly inside the circle: the pixel
+                // holding the point radius − 1.5 out has its centre within radius − 0.5 (at most
+                // 0.71 px from the point), so it is its own source, and the order of the copies
+                // does not matter.
+                let k = (radius - 1.5).max(0.0) / r2.sqrt();
                 clamp(
                     (cx + k * dx).floor() as isize,
                     (cy + k * dy).floor() as isize,

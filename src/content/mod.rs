@@ -497,7 +497,12 @@ impl<T: Pixel> Locate for Content<T> {
                     return None;
                 }
                 if rho == 0.0 {
-                    return Some((cx, cy));
+                    // The axis, or (a 360° fisheye) straight behind it: all of the rim.
+                    return Some(if theta == 0.0 {
+                        (cx, cy)
+                    } else {
+                        (cx + radius, cy)
+                    });
                 }
                 let k = radius * theta / (half * rho);
                 Some((cx + k * d.x, cy - k * d.y))

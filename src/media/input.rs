@@ -102,6 +102,8 @@ impl Sequence {
             if digits.is_empty()
                 || !digits.bytes().all(|b| b.is_ascii_digit())
                 || (width > 0 && digits.len() != width)
+                // `%d` writes numbers unpadded: `0007` is not one of its names.
+                || (width == 0 && digits.len() > 1 && digits.starts_with('0'))
             {
                 continue;
             }
@@ -243,11 +245,12 @@ impl Input {
                 let (pix_fmt, len) = pipe_format(info);
                 let mut child = super::command("ffmpeg")
                     .args(["-hide_banner", "-nostdin", "-loglevel", "error", "-xerror"])
+                    // Frames as stored: the probed size holds (a rotation tag would turn them).
+                    .arg("-noautorotate")
                     .arg("-i")
                     .arg(path)
-                    .args([
-                        "-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", pix_fmt, "pipe:1",
-                    ])
+                    .args(["-map", &format!("0:{}", info.stream)])
+                    .args(["-f", "rawvideo", "-pix_fmt", pix_fmt, "pipe:1"])
                     .stdin(Stdio::null())
                     .stdout(Stdio::piped())
                     .stderr(Stdio::piped())
@@ -321,7 +324,11 @@ fn pipe_format(info: &Info) -> (&'static str, usize) {
     let (w, h) = info.size;
     if info.deep() {
         ("rgba64le", w * h * 8)
-    } else if matches!(info.pix_fmt.as_str(), "yuv420p" | "yuvj420p") {
+    } else if info.pix_fmt == "yuvj420p" {
+        // Asked for as itself: asked for as yuv420p, some ffmpeg versions squeeze it to the
+        // limited range, and the matrix (full range, from the name) would no longer hold.
+        ("yuvj420p", yuv::frame_len(w, h))
+    } else if info.pix_fmt == "yuv420p" {
         ("yuv420p", yuv::frame_len(w, h))
     } else {
         ("rgba", w * h * 4)
@@ -331,7 +338,7 @@ fn pipe_format(info: &Info) -> (&'static str, usize) {
 fn movie_frame(buf: Vec<u8>, pix_fmt: &str, info: &Info) -> Frame {
     let (w, h) = info.size;
     match pix_fmt {
-        "yuv420p" => Frame::Yuv420(buf),
+        "yuv420p" | "yuvj420p" => Frame::Yuv420(buf),
         "rgba" => Frame::Rgba8(Raster {
             width: w,
             height: h,
@@ -450,5 +457,40 @@ impl Drop for Frames {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `%03d` takes three digits only; `%d` takes unpadded numbers only, as printf writes them;
+    /// a gap is named.
+    #[test]
+    fn patterns_match_the_names_printf_writes() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let img = Raster::from_fn(4, 2, |x, _| [x as u8, 0, 0, 255]);
+        for name in [
+            "f-1.png",
+            "f-2.png",
+            "f-0003.png",
+            "g-001.png",
+            "g-002.png",
+            "g-4.png",
+        ] {
+            image_io::write_png(&d.join(name), &img).unwrap();
+        }
+        let s = Sequence::find(&d.join("f-%d.png")).unwrap();
+        assert_eq!((s.first, s.files.len(), s.size), (1, 2, (4, 2)));
+        let s = Sequence::find(&d.join("g-%03d.png")).unwrap();
+        assert_eq!((s.first, s.files.len()), (1, 2));
+        image_io::write_png(&d.join("g-004.png"), &img).unwrap();
+        let e = Sequence::find(&d.join("g-%03d.png"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("g-003.png"), "{e}");
+        assert!(Sequence::is_pattern(Path::new("a/f-%05d.exr")));
+        assert!(!Sequence::is_pattern(Path::new("f-%5d.png")));
     }
 }

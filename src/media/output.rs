@@ -264,14 +264,20 @@ impl Sink {
             ]);
         }
         cmd.args(["-pix_fmt", &stored]);
-        for (flag, tag) in [
-            "-colorspace",
-            "-color_primaries",
-            "-color_trc",
-            "-color_range",
-        ]
-        .iter()
-        .zip(&carry.color)
+        if !rgb {
+            // The matrix and range the Y′CbCr was made with, stated: the content's own tag when
+            // it names a Y′CbCr matrix, else the one used (untagged HD is read as BT.709 by
+            // most players, where the frames were made as BT.601).
+            let space = match carry.color[0].as_deref() {
+                Some(s) if !matches!(s, "gbr" | "rgb" | "ycgco") => s,
+                _ => matrix.tag(),
+            };
+            let range = if matrix.full_range() { "pc" } else { "tv" };
+            cmd.args(["-colorspace", space, "-color_range", range]);
+        }
+        for (flag, tag) in ["-color_primaries", "-color_trc"]
+            .iter()
+            .zip(&carry.color[1..3])
         {
             if let Some(t) = tag {
                 cmd.args([*flag, t.as_str()]);
@@ -371,13 +377,26 @@ impl Sink {
     }
 
     /// Waits for the writer to finish and puts a movie in place.
-    pub fn finish(mut self) -> Result<()> {
+    /// Tells the writer the last frame has been sent and waits for it to finish writing; a
+    /// movie stays under its temporary name until [`Sink::place`].
+    pub fn complete(&mut self) -> Result<()> {
         if let Some(tx) = &self.tx {
             let _ = tx.send(Packet::End);
         }
-        self.join()?;
+        self.join()
+    }
+
+    /// Puts a completed movie in place: synced, renamed over its name, the folder synced. A
+    /// movie that cannot be put in place is removed.
+    pub fn place(mut self) -> Result<()> {
         if let Some((tmp, path)) = self.movie.take() {
-            std::fs::rename(&tmp, &path).map_err(|e| Error::file(&path, e))?;
+            let moved = std::fs::File::open(&tmp)
+                .and_then(|f| f.sync_all())
+                .and_then(|()| std::fs::rename(&tmp, &path));
+            if let Err(e) = moved {
+                let _ = std::fs::remove_file(&tmp);
+                return Err(Error::file(&path, e));
+            }
             let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
             if let Ok(d) = std::fs::File::open(dir.unwrap_or(Path::new("."))) {
                 let _ = d.sync_all();

@@ -56,6 +56,8 @@ pub struct Info {
     pub timecode: Option<String>,
     /// Colour tags as ffmpeg names them: matrix, primaries, transfer, range.
     pub color: [Option<String>; 4],
+    /// The video stream's index in the file (cover art, an attached picture, is skipped).
+    pub stream: u64,
 }
 
 impl Info {
@@ -127,6 +129,7 @@ impl Info {
             });
         let tag = |k: &str| text(video, k).filter(|t| t != "unknown" && t != "reserved");
         Ok(Info {
+            stream: video["index"].as_u64().unwrap_or(0),
             size,
             rate,
             frames,

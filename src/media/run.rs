@@ -222,8 +222,12 @@ pub fn transcode<T: Sample>(
         lap(&mut summary.waiting_for_decode);
     }
     drop(frames);
+    // Every output complete before any is put in place: a failure in one leaves none.
+    for sink in &mut sinks {
+        sink.complete()?;
+    }
     for sink in sinks {
-        sink.finish()?;
+        sink.place()?;
     }
     lap(&mut summary.waiting_for_encode);
     summary.frames = frame_no;

@@ -48,6 +48,15 @@ impl Matrix {
         }
     }
 
+    /// The name of the matrix as a stream's `color_space` tag.
+    pub fn tag(&self) -> &'static str {
+        match self.ffmpeg_name() {
+            "bt709" => "bt709",
+            "bt2020" => "bt2020nc",
+            _ => "smpte170m",
+        }
+    }
+
     /// Whether the range is full (0–255) rather than limited.
     pub fn full_range(&self) -> bool {
         self.full

@@ -199,6 +199,9 @@ fn a_movie_keeps_its_rate_sound_and_timecode_and_one_decode_feeds_every_channel(
         String::from_utf8_lossy(&out.stdout).contains("01:00:00:00")
     };
     assert!(tc("cyl.mkv"), "timecode lost");
+    // The untagged source was taken as BT.601 limited, and the output says so.
+    assert_eq!(probe(d, "cyl.mkv", "v", "color_space"), "smpte170m");
+    assert_eq!(probe(d, "cyl.mkv", "v", "color_range"), "tv");
     let sources = frames(d, "src.mkv", "in");
     let outs = frames(d, "cyl.mkv", "out");
     assert_eq!((sources.len(), outs.len()), (12, 12));
@@ -290,7 +293,7 @@ fn bad_movies_and_sequences_are_named_and_leave_nothing() {
         .unwrap();
     }
     ffmpeg(d, "-i seq-003.png -vf scale=128:64 sizes/f-003.png");
-    let cases: [(&str, &[&str], &str); 7] = [
+    let cases: [(&str, &[&str], &str); 8] = [
         ("cut.mp4", &[], "cut.mp4"),
         ("noise.mp4", &[], "noise.mp4"),
         ("gap/f-%03d.png", &[], "f-003.png"),
@@ -298,6 +301,7 @@ fn bad_movies_and_sequences_are_named_and_leave_nothing() {
         ("src.mkv", &["--frame-rate", "25"], "--frame-rate"),
         ("src.mkv", &["--encoder", "x;rm"], "--encoder"),
         ("src.mkv", &["--out", "out.gif"], "--out"),
+        ("seq-%03d.png", &["--out", "seq-%03d.png"], "--out"),
     ];
     let before: Vec<_> = std::fs::read_dir(d)
         .unwrap()
@@ -418,5 +422,48 @@ fn ctrl_c_in_the_middle_leaves_no_output() {
             .filter(|n| n != "long.mp4")
             .collect();
         assert!(left.is_empty(), "{out}: left {left:?}");
+    }
+}
+
+/// A phone's movie tagged to be shown turned, and one carrying cover art: the frames are read
+/// as stored, from the video stream, and warp as the plain movie's do. (Without
+/// `-noautorotate` the turned movie's frames differ. ffmpeg's MP4 and MOV muxers put the cover
+/// after the video, so the probed stream index, which keeps the cover out where it comes first,
+/// is not what this case tells apart.)
+#[test]
+fn rotation_tags_and_cover_art_do_not_change_the_frames_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    clip(d, "src.mkv", "yuv420p");
+    ffmpeg(
+        d,
+        "-i src.mkv -an -c:v libx264 -preset ultrafast -qp 0 plain.mp4",
+    );
+    ffmpeg(
+        d,
+        "-i plain.mp4 -c copy -metadata:s:v:0 rotate=90 turned.mp4",
+    );
+    ffmpeg(d, "-i src.mkv -frames:v 1 cover.png");
+    ffmpeg(
+        d,
+        "-i cover.png -i plain.mp4 -map 0 -map 1:v -c:v:0 png -c:v:1 copy -disposition:v:0 attached_pic covered.mp4",
+    );
+    let render = |input: &str, out: &str| {
+        let mut args = vec!["render", "--content", input, "--content-format", "equirect"];
+        args.extend(CYLINDER);
+        args.extend(["--out", out]);
+        ok(d, "omniwarp", &args);
+    };
+    render("plain.mp4", "plain.nut");
+    render("turned.mp4", "turned.nut");
+    render("covered.mp4", "covered.nut");
+    let a = frames(d, "plain.nut", "a");
+    assert_eq!(a.len(), 12);
+    for (other, prefix) in [("turned.nut", "b"), ("covered.nut", "c")] {
+        let b = frames(d, other, prefix);
+        assert_eq!(b.len(), 12, "{other}");
+        for (x, y) in a.iter().zip(&b) {
+            assert!(read_u8(x) == read_u8(y), "{other}: {}", y.display());
+        }
     }
 }

@@ -89,6 +89,13 @@ fn the_lookup_is_the_fisheye_projection_read_backwards() {
             }
         }
         assert!(checked > 1000, "{checked}");
+        if fov == 360.0 {
+            // Straight behind a 360° fisheye is its whole rim, not its centre.
+            let pad = PAD as f64;
+            let (x, y) = content.locate(DVec3::Z).unwrap();
+            let from_centre = (x - (centre[0] - 0.5 + pad)).hypot(y - (centre[1] - 0.5 + pad));
+            assert!((from_centre - radius).abs() < 1e-9, "{from_centre}");
+        }
         if fov < 360.0 {
             // Just beyond the field of view is not covered.
             let beyond = (fov / 2.0 + 0.01).to_radians();

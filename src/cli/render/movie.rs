@@ -123,6 +123,9 @@ pub fn run(mut job: Job) -> Result<()> {
     encoding.check().map_err(flag_error)?;
     let mut outputs = std::mem::take(&mut job.outputs);
     for o in &mut outputs {
+        if o.path == *path {
+            bail!("--out: {} is the content itself", o.path.display());
+        }
         if !is_media(&o.path) {
             bail!(
                 "--out: {} is not a movie ({}) or a sequence pattern (out-%05d.png)",
@@ -145,8 +148,11 @@ pub fn run(mut job: Job) -> Result<()> {
         });
     let stop = Arc::new(AtomicBool::new(false));
     // Ctrl-C ends the run between frames: outputs removed, children stopped.
+    // A second one ends the process at once (exit 130), should a stage hang.
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, stop.clone()).context("installing a signal handler")?;
+        signal_hook::flag::register_conditional_shutdown(signal, 130, stop.clone())
+            .and_then(|_| signal_hook::flag::register(signal, stop.clone()))
+            .context("installing a signal handler")?;
     }
     let spec = |o: &Output| OutputSpec {
         path: o.path.clone(),
