@@ -92,7 +92,13 @@ fn pano_locate(world: vec3<f32>) -> vec3<f32> {
             return vec3<f32>(pano.p.xy, 1.0);
         }
         let k = pano.p.z * theta / (pano.p.w * rho);
-        return vec3<f32>(pano.p.x + k * d.x, pano.p.y - k * d.y, 1.0);
+        let at = vec2<f32>(pano.p.x + k * d.x, pano.p.y - k * d.y);
+        // A full-frame fisheye's circle reaches past the frame, which holds nothing there.
+        let far = vec2<f32>(f32(pano.head.y), f32(pano.head.z)) - pad - 0.5;
+        if any(at < vec2<f32>(pad - 0.5)) || any(at > far) {
+            return vec3<f32>(0.0);
+        }
+        return vec3<f32>(at, 1.0);
     }
     let u = 0.5 + atan2(d.x, -d.z) / pano.p.z;
     let rho = length(d.xz);

@@ -56,6 +56,13 @@ pub const MEDIA_SIDE: u64 = 16384;
 pub const SEQUENCE_FRAMES: usize = 1_000_000;
 /// Outputs one run of a movie feeds (a rig's channels).
 pub const MEDIA_OUTPUTS: usize = CHANNELS;
+/// Render jobs the daemon lists (queued, running and finished); finished ones must be deleted
+/// before more are taken.
+pub const RENDER_JOBS: usize = 64;
+/// Render jobs waiting for their turn behind the one running; more are answered 503.
+pub const RENDER_JOBS_WAITING: usize = 4;
+/// Bytes of a path under the daemon's media folder.
+pub const MEDIA_PATH: usize = 1024;
 /// The smallest field of view a projection accepts, degrees: below it a content pixel is so
 /// small that pixel-sized tolerances ask for grids no export can hold.
 pub const MIN_FOV_DEG: f64 = 0.01;

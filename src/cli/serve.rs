@@ -76,6 +76,10 @@ pub struct ServeArgs {
     /// Bytes of history kept per document, patches and snapshots (e.g. 256MiB).
     #[arg(long, default_value = "256MiB", value_parser = parse_bytes)]
     history_size: u64,
+    /// The folder render jobs (POST /v1/jobs) read movies and image sequences from; each job
+    /// writes its movies into its renders/<id>/ there. Without it, jobs are refused.
+    #[arg(long, value_name = "DIR")]
+    media: Option<PathBuf>,
     /// A directory mesh screens may be read from, besides the data directory's meshes/.
     #[arg(long)]
     assets: Option<PathBuf>,
@@ -215,6 +219,19 @@ pub fn run(a: ServeArgs) -> Result<()> {
         },
     )
     .map_err(|e| anyhow::anyhow!("--data: {e}"))?;
+    let media = a
+        .media
+        .as_ref()
+        .map(|m| {
+            let m = m
+                .canonicalize()
+                .with_context(|| format!("--media {}", m.display()))?;
+            if !m.is_dir() {
+                bail!("--media: {} is not a folder", m.display());
+            }
+            Ok(m)
+        })
+        .transpose()?;
     // After the store, which makes the data directory the certificate is kept in.
     let tls = if a.tls || a.tls_cert.is_some() || (!a.bind.ip().is_loopback() && !a.plain_http) {
         Some(tls_identity(&a)?)
@@ -236,6 +253,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
                 .map_or("local".into(), |n| n.to_string_lossy().into_owned()),
             connections: usize::from(a.max_connections),
             tls: tls.clone(),
+            media,
         },
     );
     let rt = tokio::runtime::Builder::new_multi_thread()

@@ -505,7 +505,11 @@ impl<T: Pixel> Locate for Content<T> {
                     });
                 }
                 let k = radius * theta / (half * rho);
-                Some((cx + k * d.x, cy - k * d.y))
+                let (x, y) = (cx + k * d.x, cy - k * d.y);
+                // A full-frame fisheye's circle reaches past the frame; what lies beyond the
+                // frame was not shot.
+                let [x0, y0, x1, y1] = self.bounds()?;
+                ((x0..=x1).contains(&x) && (y0..=y1).contains(&y)).then_some((x, y))
             }
         }
     }

@@ -77,6 +77,9 @@ pub struct Target {
     pub size: (u32, u32),
     /// Per-pixel gains multiplied in (a channel's blend), if any.
     pub gains: Option<Vec<f32>>,
+    /// Per-pixel colour saturation (a tile screen's f: 1 as it is, 0 grey), applied before
+    /// the gains, if any.
+    pub saturation: Option<Vec<f32>>,
     /// Where the frames go.
     pub out: OutputSpec,
 }
@@ -165,7 +168,10 @@ pub fn transcode<T: Sample>(
     // conversion is affine and the filters are affine combinations, so this is the RGB path's
     // result without either conversion (up to rounding and clamping); the blend, a gain on
     // R′G′B′, is the same gain on Y′ − black and on Cb, Cr − 128.
-    let native = matches!(first, Frame::Yuv420(_)) && sinks.iter().all(|s| s.pipe == Pipe::Yuv420);
+    // Saturation is defined on R′G′B′ (Rec. 709 luma), so a target with one takes that path.
+    let native = matches!(first, Frame::Yuv420(_))
+        && sinks.iter().all(|s| s.pipe == Pipe::Yuv420)
+        && targets.iter().all(|t| t.saturation.is_none());
     let black = if matrix.full_range() { 0 } else { 16 };
     let mut buffers: Vec<Raster<T>> = targets
         .iter()
@@ -194,6 +200,9 @@ pub fn transcode<T: Sample>(
         frames.recycle(frame);
         for ((t, buf), sink) in targets.iter().zip(&mut buffers).zip(&mut sinks) {
             t.plan.render_into(content.atlas(), buf)?;
+            if let Some(f) = &t.saturation {
+                crate::tiles::raster::saturation(buf, f);
+            }
             if let (Some(g), false) = (&t.gains, native) {
                 apply_gains(buf, g)?;
             }

@@ -59,3 +59,81 @@ impl Canvas {
             .transpose()
     }
 }
+
+impl Canvas {
+    /// The content an image shows laid out on this canvas (a movie's frame, say), for the
+    /// content kinds the frame loop samples: equirectangular and cylindrical panoramas,
+    /// equidistant fisheyes and dome masters, at zoom 1 and on axis. The image may have any
+    /// size: its edges are the canvas's, as the 2d exports' coordinates say (a fisheye's
+    /// must have the canvas's aspect, so that its circle stays round). Errors name the
+    /// canvas's field.
+    pub fn content<T: crate::raster::Pixel>(
+        &self,
+        image: &crate::raster::Raster<T>,
+    ) -> crate::Result<crate::content::Content<T>> {
+        use crate::content::{Content, Fisheye};
+        use crate::projection::Orientation;
+        let view = self.view()?;
+        if self.zoom != 1.0 || self.offaxis != [0.0; 3] {
+            return Err(crate::Error::invalid(
+                if self.zoom != 1.0 {
+                    "/zoom"
+                } else {
+                    "/offaxis"
+                },
+                "a movie is laid out on canvases at zoom 1 with no off-axis vector",
+            ));
+        }
+        let turn = Orientation::look(
+            glam::DVec3::from_array(self.look_to),
+            glam::DVec3::from_array(self.look_up),
+        )
+        .map_err(crate::projection::doc::pointer)?;
+        let projection = view.projection();
+        let form = projection.shader_form();
+        let deg = f64::to_degrees;
+        let content = match (form.kind, form.radial) {
+            (3, _) => Content::equirect(image, deg(2.0 * form.p[0]), deg(2.0 * form.p[1])),
+            (1, _) => {
+                Content::cylindrical(image, deg(2.0 * form.p[0]), deg(2.0 * form.p[1].atan()))
+            }
+            (4, 0) => {
+                let (w, h) = (image.width as f64, image.height as f64);
+                let [cw, ch] = self.size.map(f64::from);
+                if ((w / h) / (cw / ch) - 1.0).abs() > 0.01 {
+                    return Err(crate::Error::invalid(
+                        "/size",
+                        format!(
+                            "a fisheye's frame must have the canvas's aspect ratio: the frame is \
+                             {w}×{h}, the canvas {cw}×{ch}"
+                        ),
+                    ));
+                }
+                // θ = r per unit of s: half the frame's width is sx radians from the centre.
+                let (sx, theta_max) = (form.p[0], form.p[2]);
+                let tilt =
+                    (projection.name() == "domemaster").then(|| self.params.tilt.unwrap_or(0.0));
+                let f = Fisheye {
+                    fov: deg(2.0 * theta_max).min(360.0),
+                    tilt,
+                    centre: Some([w / 2.0, h / 2.0]),
+                    radius: Some(theta_max / sx * w / 2.0),
+                };
+                Content::fisheye(image, &f)
+            }
+            _ => {
+                return Err(crate::Error::invalid(
+                    "/projection",
+                    format!(
+                        "a movie is laid out on equirect, cylindrical, fisheye (equidistant) and \
+                         domemaster canvases, not `{}`",
+                        projection.name()
+                    ),
+                ));
+            }
+        };
+        Ok(content
+            .map_err(|e| crate::Error::invalid("/params", e.to_string()))?
+            .with_orientation(turn))
+    }
+}

@@ -7,14 +7,15 @@
 pub mod client;
 mod http;
 mod previews;
+pub mod renders;
 mod routes;
 pub mod storage;
 pub mod tls;
 
 use http::guard;
 use routes::{
-    calib, captures, channels, console, exports, geometry, history, meshes, outputs, plan, rig,
-    show,
+    calib, captures, channels, console, exports, geometry, history, meshes, outputs, plan,
+    renders as jobs, rig, show,
 };
 
 pub use crate::rig::Canvas;
@@ -93,6 +94,10 @@ routes! {
     "/v1/channels/{id}/wall" => post(captures::post_wall);
     "/v1/channels/{id}/exports/{file}" => get(exports::channel_export);
     "/v1/export.mpcdi" => get(exports::mpcdi_package);
+    "/v1/jobs" => get(jobs::list).post(jobs::create);
+    "/v1/jobs/{id}" => get(jobs::get_job).delete(jobs::delete);
+    "/v1/jobs/{id}/cancel" => post(jobs::cancel);
+    "/v1/jobs/{id}/files/{name}" => get(jobs::file);
     "/v1/meshes" => get(meshes::list);
     "/v1/meshes/{name}" => put(meshes::put).delete(meshes::delete);
     "/v1/events" => get(rig::events);
@@ -242,6 +247,9 @@ pub async fn launch(
     }
     drop(listener);
     state.stopping.send_replace(true);
+    // A render job stops between frames and removes what it had written, its ffmpeg children
+    // with it, before the process ends.
+    state.renders.stop_all(DRAIN).await;
     tokio::select! {
         () = graceful.shutdown() => {}
         () = tokio::time::sleep(DRAIN) => {

@@ -6,6 +6,7 @@
 mod common;
 
 mod calibration;
+mod canvas;
 mod exactness;
 mod export;
 mod failure_map;

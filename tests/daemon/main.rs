@@ -11,6 +11,7 @@ mod disconnect;
 mod durability;
 mod history;
 mod hostile;
+mod jobs;
 mod pressure;
 mod server;
 mod server_edit;

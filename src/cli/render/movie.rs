@@ -236,6 +236,7 @@ fn go<T: Sample>(
                 plan,
                 size,
                 gains: o.gains,
+                saturation: None,
                 out,
             });
         }

@@ -57,6 +57,8 @@ pub struct Options {
     pub connections: usize,
     /// Serve TLS with this identity (`None`: plain HTTP, loopback's default).
     pub tls: Option<crate::server::tls::Tls>,
+    /// The folder render jobs read content from and write `renders/` into (`None`: no jobs).
+    pub media: Option<std::path::PathBuf>,
 }
 
 impl Default for Options {
@@ -69,6 +71,7 @@ impl Default for Options {
             user: "local".into(),
             connections: crate::server::CONNECTIONS,
             tls: None,
+            media: None,
         }
     }
 }
@@ -114,6 +117,8 @@ pub struct AppState {
     pub shows: Shows,
     /// Camera captures uploaded for calibration.
     pub captures: Captures,
+    /// Render jobs and the media folder they read from.
+    pub renders: crate::server::renders::Renders,
 }
 
 impl AppState {
@@ -132,6 +137,7 @@ impl AppState {
     /// The state of a daemon serving `store` with `options`.
     pub fn with_options(store: Store, options: Options) -> Arc<Self> {
         let feeds = FEEDS.min(options.connections / 2);
+        let renders = crate::server::renders::Renders::open(options.media.as_deref());
         Arc::new(AppState {
             store,
             options,
@@ -152,6 +158,7 @@ impl AppState {
             keeper: Default::default(),
             shows: Default::default(),
             captures: Default::default(),
+            renders,
         })
     }
 

@@ -1,6 +1,7 @@
 //! The routes, one file per resource: the rig and its channels, their documents (content canvas,
 //! tile screens) and history, the outputs (warp maps, blends, previews, test cards, exports), the
-//! camera calibration (patterns, captures, proposals), meshes, scenes and the console's assets.
+//! camera calibration (patterns, captures, proposals), meshes, scenes, render jobs and the
+//! console's assets.
 
 pub mod calib;
 pub mod captures;
@@ -12,5 +13,6 @@ pub mod history;
 pub mod meshes;
 pub mod outputs;
 pub mod plan;
+pub mod renders;
 pub mod rig;
 pub mod show;

@@ -1,0 +1,594 @@
+//! Render jobs: a movie or an image sequence from the daemon's media folder through the warps of
+//! chosen channels, one blended movie per channel from a single decode (the `render --out-dir`
+//! frame loop), run one at a time beside the API under a worker permit, with progress on the
+//! change feed.
+//!
+//! Each job keeps its outputs and a `job.json` record in `<media>/renders/<id>/`, written
+//! atomically at every change of state, so the list survives a restart; a job the daemon
+//! stopped in (killed, or shut down) comes back failed, its partial files removed.
+
+use crate::media::{Encoding, Input, OutputSpec, Progress, Sample, Target};
+use crate::render::{Filter, Plan, Warp};
+use crate::rig::Canvas;
+use crate::server::storage::cache::Computed;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// Where a job stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum State {
+    /// Waiting for its turn (one job runs at a time).
+    Queued,
+    /// Decoding, warping and encoding.
+    Running,
+    /// Finished: its files are complete.
+    Done,
+    /// Stopped by an error; nothing of it kept.
+    Failed,
+    /// Stopped on request (or by the daemon's shutdown); nothing of it kept.
+    Cancelled,
+}
+
+impl State {
+    /// Whether the job has stopped for good.
+    pub fn finished(self) -> bool {
+        matches!(self, State::Done | State::Failed | State::Cancelled)
+    }
+}
+
+/// What the blend does to a job's outputs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Blend {
+    /// Multiplied into the frames.
+    #[default]
+    Baked,
+    /// Written beside each movie as `<channel>-blend.png`, the frames left unblended.
+    Separate,
+    /// Left out.
+    None,
+}
+
+/// A file a job made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct File {
+    /// Its name in the job's folder (and in `GET /v1/jobs/{id}/files/{name}`).
+    pub name: String,
+    /// The channel it is for.
+    pub channel: String,
+    /// Its size, bytes.
+    pub bytes: u64,
+}
+
+/// Why a job failed: the field at fault where there is one, and the reason.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Failure {
+    /// The field at fault (a JSON pointer), where there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// What went wrong.
+    pub reason: String,
+}
+
+/// A job as the API shows it and `job.json` keeps it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    /// The job's number, never reused while the media folder keeps its folder.
+    pub id: u64,
+    /// Where it stands.
+    pub state: State,
+    /// The content, as a path under the media folder.
+    pub content: String,
+    /// The channels rendered, in order.
+    pub channels: Vec<String>,
+    /// The container of the outputs (`mp4`, `mov`, `mkv`, `nut`).
+    pub container: String,
+    /// What the blend does to the outputs.
+    pub blend: Blend,
+    /// The rig revision the warps were taken from.
+    pub rig_revision: u64,
+    /// When the job was asked for, milliseconds since 1970.
+    pub created_ms: i64,
+    /// When it ended, milliseconds since 1970.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub finished_ms: Option<i64>,
+    /// Frames done.
+    pub frame: u64,
+    /// Frames in all, when the content says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<u64>,
+    /// Frames a second so far.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+    /// Seconds left at that rate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eta_seconds: Option<f64>,
+    /// What a finished job made.
+    pub files: Vec<File>,
+    /// Why it failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<Failure>,
+}
+
+/// One channel of a job: its warp as the daemon had computed it when the job was asked for.
+pub struct Channel {
+    /// The channel's id.
+    pub id: String,
+    /// Its warp map, blend weights and tile screen's saturation.
+    pub computed: Arc<Computed>,
+}
+
+/// Everything a job runs from, checked when it was asked for.
+pub struct Work {
+    /// The content, probed.
+    pub input: Input,
+    /// The channels, in the order of the outputs.
+    pub channels: Vec<Channel>,
+    /// The content canvas all the channels share.
+    pub canvas: Canvas,
+    /// How the movies are encoded.
+    pub encoding: Encoding,
+    /// The texture filter.
+    pub filter: Filter,
+}
+
+struct Entry {
+    record: Mutex<Record>,
+    stop: AtomicBool,
+}
+
+/// The daemon's render jobs and its media folder.
+pub struct Renders {
+    /// The media folder, canonical (`serve --media`); `None`: jobs are refused.
+    pub folder: Option<PathBuf>,
+    jobs: Mutex<BTreeMap<u64, Arc<Entry>>>,
+    next: AtomicU64,
+    /// One job runs at a time: a movie keeps every core busy by itself.
+    turn: Arc<tokio::sync::Semaphore>,
+}
+
+/// The `job.json` name in a job's folder.
+const RECORD: &str = "job.json";
+
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+impl Renders {
+    /// The jobs kept under `folder`'s `renders/`; a job the daemon stopped in is marked failed
+    /// and its partial files removed. Records that cannot be read are left alone, with a
+    /// warning.
+    pub fn open(folder: Option<&Path>) -> Renders {
+        let mut jobs = BTreeMap::new();
+        if let Some(root) = folder.map(|f| f.join("renders"))
+            && let Ok(dirs) = std::fs::read_dir(&root)
+        {
+            for dir in dirs.flatten().map(|d| d.path()) {
+                let path = dir.join(RECORD);
+                let Ok(text) = std::fs::read(&path) else {
+                    continue;
+                };
+                let mut record: Record = match serde_json::from_slice(&text) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        tracing::warn!(path = %path.display(), error = %e, "a render job's record cannot be read; left alone");
+                        continue;
+                    }
+                };
+                if dir.file_name() != Some(std::ffi::OsStr::new(&record.id.to_string())) {
+                    continue;
+                }
+                if !record.state.finished() {
+                    clear(&dir, &[]);
+                    record.state = State::Failed;
+                    record.finished_ms = Some(now_ms());
+                    record.files.clear();
+                    record.error = Some(Failure {
+                        field: None,
+                        reason: "the daemon stopped before the job finished; nothing of it was \
+                                 kept"
+                            .into(),
+                    });
+                    if let Err(e) = save(&dir, &record) {
+                        tracing::warn!(error = %e, "cannot mark an interrupted render job failed");
+                    }
+                }
+                jobs.insert(
+                    record.id,
+                    Arc::new(Entry {
+                        record: Mutex::new(record),
+                        stop: AtomicBool::new(false),
+                    }),
+                );
+            }
+        }
+        let next = jobs.keys().next_back().map_or(1, |k| k + 1);
+        Renders {
+            folder: folder.map(Path::to_path_buf),
+            jobs: Mutex::new(jobs),
+            next: AtomicU64::new(next),
+            turn: Arc::new(tokio::sync::Semaphore::new(1)),
+        }
+    }
+
+    /// Every job, newest first.
+    pub fn list(&self) -> Vec<Record> {
+        let jobs = self.jobs.lock().expect("jobs lock");
+        jobs.values()
+            .rev()
+            .map(|e| e.record.lock().expect("job lock").clone())
+            .collect()
+    }
+
+    /// Job `id` as it stands.
+    pub fn get(&self, id: u64) -> Option<Record> {
+        let jobs = self.jobs.lock().expect("jobs lock");
+        jobs.get(&id)
+            .map(|e| e.record.lock().expect("job lock").clone())
+    }
+
+    /// The folder of job `id`.
+    pub fn dir(&self, id: u64) -> Option<PathBuf> {
+        self.folder
+            .as_ref()
+            .map(|f| f.join("renders").join(id.to_string()))
+    }
+
+    /// Takes a new job, queued, if the limits leave room: `Err(true)` when too many wait,
+    /// `Err(false)` when the list is full.
+    fn admit(&self, mut record: Record) -> Result<(Arc<Entry>, PathBuf), bool> {
+        let mut jobs = self.jobs.lock().expect("jobs lock");
+        let active = jobs
+            .values()
+            .filter(|e| !e.record.lock().expect("job lock").state.finished())
+            .count();
+        if active > crate::limits::RENDER_JOBS_WAITING {
+            return Err(true);
+        }
+        if jobs.len() >= crate::limits::RENDER_JOBS {
+            return Err(false);
+        }
+        record.id = self.next.fetch_add(1, Ordering::Relaxed);
+        let dir = self
+            .dir(record.id)
+            .expect("admitted only with a media folder");
+        let entry = Arc::new(Entry {
+            record: Mutex::new(record.clone()),
+            stop: AtomicBool::new(false),
+        });
+        jobs.insert(record.id, entry.clone());
+        Ok((entry, dir))
+    }
+
+    /// Forgets finished job `id`; its record, or `Err` with it when it has not finished.
+    pub fn remove(&self, id: u64) -> Option<Result<Record, Record>> {
+        let mut jobs = self.jobs.lock().expect("jobs lock");
+        let record = jobs.get(&id)?.record.lock().expect("job lock").clone();
+        if !record.state.finished() {
+            return Some(Err(record));
+        }
+        jobs.remove(&id);
+        Some(Ok(record))
+    }
+
+    /// Stops every job (the daemon is shutting down) and waits up to `wait` for the running
+    /// one to clean up after itself.
+    pub async fn stop_all(&self, wait: std::time::Duration) {
+        let entries: Vec<_> = self
+            .jobs
+            .lock()
+            .expect("jobs lock")
+            .values()
+            .cloned()
+            .collect();
+        for e in &entries {
+            e.stop.store(true, Ordering::Relaxed);
+        }
+        let until = tokio::time::Instant::now() + wait;
+        while entries
+            .iter()
+            .any(|e| e.record.lock().expect("job lock").state == State::Running)
+            && tokio::time::Instant::now() < until
+        {
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        }
+    }
+}
+
+/// Writes a job's record atomically into its folder.
+fn save(dir: &Path, record: &Record) -> crate::Result<()> {
+    let text = serde_json::to_vec_pretty(record).expect("records serialise");
+    crate::image_io::atomic_write(&dir.join(RECORD), |f| {
+        std::io::Write::write_all(f, &text).map_err(|e| crate::Error::file(dir.join(RECORD), e))
+    })
+}
+
+/// Removes every file of a job's folder but its record and `keep`.
+fn clear(dir: &Path, keep: &[String]) {
+    if let Ok(files) = std::fs::read_dir(dir) {
+        for f in files.flatten() {
+            let name = f.file_name().to_string_lossy().into_owned();
+            if name != RECORD && !keep.contains(&name) {
+                let _ = std::fs::remove_file(f.path());
+            }
+        }
+    }
+}
+
+/// Queues `record` for `work` and starts it when its turn comes: the queued record, `Err(true)`
+/// when too many wait, `Err(false)` when the list is full.
+pub fn submit(
+    s: &Arc<super::AppState>,
+    record: Record,
+    work: Work,
+    blend: Blend,
+) -> Result<Record, bool> {
+    let (entry, dir) = s.renders.admit(record)?;
+    let queued = entry.record.lock().expect("job lock").clone();
+    let state = s.clone();
+    tokio::spawn(async move {
+        let (st, e, d) = (state.clone(), entry.clone(), dir.clone());
+        let _ = tokio::task::spawn_blocking(move || update(&st, &e, &d, |_| {})).await;
+        // Its turn, then a worker permit for the whole run (previews keep the others).
+        let turn = state.renders.turn.clone().acquire_owned().await;
+        let permit = state.workers.clone().acquire_owned().await;
+        let (Ok(_turn), Ok(permit)) = (turn, permit) else {
+            return;
+        };
+        let _ = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            let started = {
+                let mut r = entry.record.lock().expect("job lock");
+                let go = r.state == State::Queued && !entry.stop.load(Ordering::Relaxed);
+                if go {
+                    r.state = State::Running;
+                }
+                go
+            };
+            if !started {
+                // Cancelled while it waited: the cancel recorded it.
+                return;
+            }
+            update(&state, &entry, &dir, |_| {});
+            let outcome = run(&state, &entry, &dir, work, blend);
+            let stopping = *state.stopping.borrow();
+            if outcome.is_err() {
+                clear(&dir, &[]);
+            }
+            update(&state, &entry, &dir, |r| {
+                r.finished_ms = Some(now_ms());
+                r.eta_seconds = None;
+                match outcome {
+                    Ok(files) => {
+                        r.state = State::Done;
+                        r.files = files;
+                    }
+                    Err(crate::Error::Cancelled) => {
+                        r.state = State::Cancelled;
+                        if stopping {
+                            r.error = Some(Failure {
+                                field: None,
+                                reason: "the daemon was stopped".into(),
+                            });
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(job = r.id, error = %e, "render job failed");
+                        r.state = State::Failed;
+                        r.error = Some(match e {
+                            crate::Error::Invalid { name, reason } => Failure {
+                                field: Some(name),
+                                reason,
+                            },
+                            other => Failure {
+                                field: None,
+                                reason: other.to_string(),
+                            },
+                        });
+                    }
+                }
+            });
+        })
+        .await;
+    });
+    Ok(queued)
+}
+
+/// Asks job `id` to stop and waits (up to `wait`) until it has: a queued job is cancelled at
+/// once, a running one between two frames. Its record, `None` if there is no such job.
+pub async fn cancel(
+    s: &Arc<super::AppState>,
+    id: u64,
+    wait: std::time::Duration,
+) -> Option<Record> {
+    let entry = s
+        .renders
+        .jobs
+        .lock()
+        .expect("jobs lock")
+        .get(&id)
+        .cloned()?;
+    entry.stop.store(true, Ordering::Relaxed);
+    let was_queued = {
+        let mut r = entry.record.lock().expect("job lock");
+        let queued = r.state == State::Queued;
+        if queued {
+            r.state = State::Cancelled;
+            r.finished_ms = Some(now_ms());
+        }
+        queued
+    };
+    if was_queued && let Some(dir) = s.renders.dir(id) {
+        let (st, e) = (s.clone(), entry.clone());
+        let _ = tokio::task::spawn_blocking(move || update(&st, &e, &dir, |_| {})).await;
+    }
+    let until = tokio::time::Instant::now() + wait;
+    loop {
+        let r = entry.record.lock().expect("job lock").clone();
+        if r.state.finished() || tokio::time::Instant::now() >= until {
+            return Some(r);
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+}
+
+/// Changes a job's record, keeps it and announces it.
+fn update(s: &super::AppState, entry: &Entry, dir: &Path, change: impl FnOnce(&mut Record)) {
+    let record = {
+        let mut r = entry.record.lock().expect("job lock");
+        change(&mut r);
+        r.clone()
+    };
+    let kept = std::fs::create_dir_all(dir)
+        .map_err(|e| crate::Error::file(dir, e))
+        .and_then(|()| save(dir, &record));
+    if let Err(e) = kept {
+        tracing::warn!(job = record.id, error = %e, "cannot keep a render job's record");
+    }
+    announce(s, &record);
+}
+
+fn announce(s: &super::AppState, r: &Record) {
+    s.announce(serde_json::json!({
+        "kind": "job", "id": r.id, "state": r.state, "frame": r.frame, "frames": r.frames,
+        "fps": r.fps, "eta_seconds": r.eta_seconds,
+    }));
+}
+
+/// The job itself, on the blocking pool: the content decoded once, warped and blended for
+/// every channel, each output encoded; the files it made.
+fn run(
+    s: &super::AppState,
+    entry: &Entry,
+    dir: &Path,
+    work: Work,
+    blend: Blend,
+) -> crate::Result<Vec<File>> {
+    std::fs::create_dir_all(dir).map_err(|e| crate::Error::file(dir, e))?;
+    let ext = entry.record.lock().expect("job lock").container.clone();
+    let name = |id: &str| format!("{id}.{ext}");
+    let mut blends = Vec::new();
+    let mut outputs = Vec::new();
+    for c in &work.channels {
+        let computed = &c.computed;
+        let gains = crate::rig::signal_gains(&computed.geometry.weights, 2.2)?;
+        let gains = match blend {
+            Blend::Baked => Some(gains),
+            Blend::Separate => {
+                let mask = crate::raster::Raster {
+                    width: computed.map.width(),
+                    height: computed.map.height(),
+                    data: gains
+                        .iter()
+                        .map(|&g| {
+                            let v = (g.clamp(0.0, 1.0) * 255.0).round() as u8;
+                            [v, v, v, 255]
+                        })
+                        .collect(),
+                };
+                let file = format!("{}-blend.png", c.id);
+                crate::image_io::write_png(&dir.join(&file), &mask)?;
+                blends.push((file, c.id.clone()));
+                None
+            }
+            Blend::None => None,
+        };
+        outputs.push((c, gains));
+    }
+    let mut last = std::time::Instant::now();
+    let progress = |p: Progress| {
+        let fps = p.frame as f64 / p.elapsed.as_secs_f64().max(1e-9);
+        let mut r = entry.record.lock().expect("job lock");
+        r.frame = p.frame;
+        r.fps = Some((fps * 100.0).round() / 100.0);
+        r.eta_seconds = p
+            .frames
+            .map(|n| (n.saturating_sub(p.frame) as f64 / fps.max(1e-9)).round());
+        // The feed hears of progress twice a second, not every frame.
+        if last.elapsed().as_millis() >= 500 {
+            last = std::time::Instant::now();
+            let snapshot = r.clone();
+            drop(r);
+            announce(s, &snapshot);
+        }
+    };
+    let specs: Vec<OutputSpec> = work
+        .channels
+        .iter()
+        .map(|c| OutputSpec {
+            path: dir.join(name(&c.id)),
+            encoding: work.encoding.clone(),
+        })
+        .collect();
+    let canvas = work.canvas.clone();
+    let filter = work.filter;
+    let stop = &entry.stop;
+    if work.input.deep() {
+        go::<[f32; 4]>(&work.input, &canvas, outputs, specs, filter, progress, stop)?;
+    } else {
+        go::<[u8; 4]>(&work.input, &canvas, outputs, specs, filter, progress, stop)?;
+    }
+    let mut files = Vec::new();
+    for c in &work.channels {
+        let file = name(&c.id);
+        files.push((file, c.id.clone()));
+    }
+    files.extend(blends);
+    files
+        .into_iter()
+        .map(|(name, channel)| {
+            let path = dir.join(&name);
+            let bytes = std::fs::metadata(&path)
+                .map_err(|e| crate::Error::file(&path, e))?
+                .len();
+            Ok(File {
+                name,
+                channel,
+                bytes,
+            })
+        })
+        .collect()
+}
+
+fn go<T: Sample>(
+    input: &Input,
+    canvas: &Canvas,
+    outputs: Vec<(&Channel, Option<Vec<f32>>)>,
+    specs: Vec<OutputSpec>,
+    filter: Filter,
+    progress: impl FnMut(Progress),
+    stop: &AtomicBool,
+) -> crate::Result<crate::media::Summary> {
+    let setup = |first: &crate::raster::Raster<T>| {
+        let content = canvas.content(first)?;
+        let mut targets = Vec::new();
+        for ((c, gains), out) in outputs.into_iter().zip(specs) {
+            let map = &c.computed.map;
+            let size = (map.width() as u32, map.height() as u32);
+            let plan = Plan::new(
+                Warp::Map(map),
+                &content,
+                content.atlas(),
+                size.0,
+                size.1,
+                1,
+                filter,
+            )?;
+            targets.push(Target {
+                plan,
+                size,
+                gains,
+                saturation: c.computed.f.clone(),
+                out,
+            });
+        }
+        Ok((content, targets))
+    };
+    crate::media::transcode(input, setup, progress, stop)
+}
