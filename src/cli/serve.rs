@@ -229,6 +229,12 @@ pub fn run(a: ServeArgs) -> Result<()> {
             if !m.is_dir() {
                 bail!("--media: {} is not a folder", m.display());
             }
+            // Jobs write there: a folder they cannot write to is found now, not at the end of
+            // the first job.
+            let renders = m.join("renders");
+            std::fs::create_dir_all(&renders)
+                .and_then(|()| tempfile::tempfile_in(&renders).map(drop))
+                .with_context(|| format!("--media: cannot write to {}", renders.display()))?;
             Ok(m)
         })
         .transpose()?;
@@ -259,7 +265,7 @@ pub fn run(a: ServeArgs) -> Result<()> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
-    rt.block_on(async move {
+    let served = rt.block_on(async move {
         let listener = tokio::net::TcpListener::bind(a.bind)
             .await
             .with_context(|| format!("--bind {}", a.bind))?;
@@ -285,7 +291,11 @@ pub fn run(a: ServeArgs) -> Result<()> {
         let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
         tracing::info!("stopped");
         Ok(())
-    })
+    });
+    // A render job whose encoder hangs must not hold the process after it was told to stop
+    // (it was asked to stop, and given the drain time, in `launch`).
+    rt.shutdown_timeout(std::time::Duration::from_secs(1));
+    served
 }
 
 /// SIGINT or SIGTERM.

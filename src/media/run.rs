@@ -8,7 +8,6 @@ use super::yuv::{Decoder, Encoder, Matrix};
 use crate::content::Content;
 use crate::raster::{Pixel, Raster};
 use crate::render::Plan;
-use crate::rig::apply_gains;
 use crate::{Error, Result};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -147,6 +146,17 @@ pub fn transcode<T: Sample>(
             ),
         ));
     }
+    for t in &targets {
+        let pixels = (t.size.0 * t.size.1) as usize;
+        for (name, v) in [("gains", &t.gains), ("saturation", &t.saturation)] {
+            if let Some(n) = v.as_ref().map(Vec::len).filter(|&n| n != pixels) {
+                return Err(Error::invalid(
+                    name,
+                    format!("{n} values for a {}×{} output", t.size.0, t.size.1),
+                ));
+            }
+        }
+    }
     let carry = Carry {
         audio_from: match input {
             Input::Movie { path, info } if info.audio => Some(path.clone()),
@@ -199,25 +209,19 @@ pub fn transcode<T: Sample>(
         }
         frames.recycle(frame);
         for ((t, buf), sink) in targets.iter().zip(&mut buffers).zip(&mut sinks) {
-            t.plan.render_into(content.atlas(), buf)?;
-            if let Some(f) = &t.saturation {
-                crate::tiles::raster::saturation(buf, f);
-            }
-            if let (Some(g), false) = (&t.gains, native) {
-                apply_gains(buf, g)?;
-            }
-            lap(&mut summary.warp);
-            let bytes = sink.buffer();
-            let packet = match sink.pipe {
-                Pipe::Yuv420 if native => {
-                    Packet::Bytes(pack_native(buf, t.gains.as_deref(), black, bytes))
-                }
-                Pipe::Yuv420 => Packet::Bytes(pack_yuv(buf, &encoder, bytes)),
-                Pipe::Rgba => Packet::Bytes(pack_rgba(buf, bytes)),
-                Pipe::Png => Packet::U8(buf.map(T::to_rgba8)),
-                Pipe::Exr => Packet::F32(buf.map(T::to_unit)),
+            let way = Way {
+                pipe: sink.pipe,
+                native,
+                black,
+                encoder: &encoder,
             };
-            lap(&mut summary.pack);
+            let packet = warp(t, content.atlas(), buf, &way, sink.buffer(), &mut |s| {
+                lap(if s == Stage::Warp {
+                    &mut summary.warp
+                } else {
+                    &mut summary.pack
+                })
+            })?;
             sink.send(packet)?;
             lap(&mut summary.waiting_for_encode);
         }
@@ -242,6 +246,101 @@ pub fn transcode<T: Sample>(
     summary.frames = frame_no;
     summary.seconds = start.elapsed().as_secs_f64();
     Ok(summary)
+}
+
+/// Where a frame's time went, for the run's summary.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    /// Warping and blending (with the 4:2:0 packing, done band by band as the warp draws).
+    Warp,
+    /// Packing a whole frame for its writer.
+    Pack,
+}
+
+/// How a target's frames leave the loop.
+struct Way<'a> {
+    pipe: Pipe,
+    /// The frame was warped in Y′CbCr (see `transcode`).
+    native: bool,
+    /// Y′ of black.
+    black: u8,
+    encoder: &'a Encoder,
+}
+
+/// One frame of one target: warped from `atlas` into `buf`, saturation and gains applied,
+/// packed for its writer into `bytes` (a buffer to reuse). For a 4:2:0 pipe the packing runs on
+/// each band of rows as soon as it is drawn, while it is in the cache: a 4K frame is 33 MB of
+/// pixels, which otherwise go out to memory and back once more.
+fn warp<T: Sample>(
+    t: &Target,
+    atlas: &crate::content::Atlas<T>,
+    buf: &mut Raster<T>,
+    way: &Way,
+    bytes: Vec<u8>,
+    lap: &mut dyn FnMut(Stage),
+) -> Result<Packet> {
+    let (gains, sat) = (t.gains.as_deref(), t.saturation.as_deref());
+    let w = buf.width;
+    if way.pipe == Pipe::Yuv420 {
+        let mut bytes = sized(bytes, super::yuv::frame_len(w, buf.height));
+        let pieces = bands(&mut bytes, w, buf.height);
+        t.plan
+            .render_bands(atlas, buf, pieces, |y0, px, (ys, us, vs)| {
+                let at = y0 * w..y0 * w + px.len();
+                if way.native {
+                    pack_native(px, w, gains.map(|g| &g[at]), way.black, ys, us, vs);
+                } else {
+                    finish(px, sat.map(|f| &f[at.clone()]), gains.map(|g| &g[at]));
+                    pack_yuv(px, w, way.encoder, ys, us, vs);
+                }
+            })?;
+        lap(Stage::Warp);
+        return Ok(Packet::Bytes(bytes));
+    }
+    t.plan.render_into(atlas, buf)?;
+    buf.data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let at = y * w..(y + 1) * w;
+        finish(row, sat.map(|f| &f[at.clone()]), gains.map(|g| &g[at]));
+    });
+    lap(Stage::Warp);
+    let packet = match way.pipe {
+        Pipe::Rgba => Packet::Bytes(pack_rgba(buf, bytes)),
+        Pipe::Png => Packet::U8(buf.map(T::to_rgba8)),
+        Pipe::Exr => Packet::F32(buf.map(T::to_unit)),
+        Pipe::Yuv420 => unreachable!("packed band by band above"),
+    };
+    lap(Stage::Pack);
+    Ok(packet)
+}
+
+/// A tile screen's saturation, then the blend's gains, on warped pixels.
+fn finish<T: Pixel>(px: &mut [T], saturation: Option<&[f32]>, gains: Option<&[f32]>) {
+    if let Some(f) = saturation {
+        for (p, &s) in px.iter_mut().zip(f) {
+            crate::tiles::raster::saturate(p, s);
+        }
+    }
+    if let Some(g) = gains {
+        for (p, &m) in px.iter_mut().zip(g) {
+            crate::rig::gain(p, m);
+        }
+    }
+}
+
+/// The 4:2:0 planes in `out` cut into the pieces of a frame's bands of [`Plan::BAND`] rows:
+/// each band's luma rows and its half as many chroma rows of each plane.
+type Planes<'a> = (&'a mut [u8], &'a mut [u8], &'a mut [u8]);
+
+fn bands(out: &mut [u8], w: usize, h: usize) -> Vec<Planes<'_>> {
+    let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+    let (luma, chroma) = out.split_at_mut(w * h);
+    let (cb, cr) = chroma.split_at_mut(cw * ch);
+    let rows = Plan::BAND;
+    luma.chunks_mut(w * rows)
+        .zip(cb.chunks_mut(cw * rows / 2))
+        .zip(cr.chunks_mut(cw * rows / 2))
+        .map(|((y, u), v)| (y, u, v))
+        .collect()
 }
 
 /// A whole frame as a raster, for the content's first layout.
@@ -334,27 +433,25 @@ fn fill_native<T: Sample>(
     })
 }
 
-/// 4:2:0 planes of a frame warped in Y′CbCr: luma as it is, chroma averaged over each 2×2
-/// block, black where nothing is shown, the blend's gain applied about black. Row pairs in
-/// parallel; without a blend, plain loops over bytes that the compiler vectorises.
+/// A band of a frame warped in Y′CbCr as 4:2:0 rows: luma as it is, chroma averaged over each
+/// 2×2 block, black where nothing is shown, the blend's gain applied about black. Without a
+/// blend, plain loops over bytes that the compiler vectorises.
 fn pack_native<T: Sample>(
-    img: &Raster<T>,
+    px: &[T],
+    w: usize,
     gains: Option<&[f32]>,
     black: u8,
-    out: Vec<u8>,
-) -> Vec<u8> {
-    let (w, h) = (img.width, img.height);
-    let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-    let mut out = sized(out, super::yuv::frame_len(w, h));
-    let (luma, chroma) = out.split_at_mut(w * h);
-    let (cb, cr) = chroma.split_at_mut(cw * ch);
-    if let (None, Some(data)) = (gains, T::bytes(&img.data)) {
-        pack_plain(data, w, h, black, luma, cb, cr);
-        return out;
+    luma: &mut [u8],
+    cb: &mut [u8],
+    cr: &mut [u8],
+) {
+    if let (None, Some(data)) = (gains, T::bytes(px)) {
+        pack_plain(data, w, black, luma, cb, cr);
+        return;
     }
     // A pixel as (Y′, Cb, Cr, shown): gained about black where there is a blend.
     let code = |i: usize| -> [u8; 4] {
-        let p = img.data[i].to_rgba8();
+        let p = px[i].to_rgba8();
         match gains {
             None => p,
             Some(g) => {
@@ -366,67 +463,69 @@ fn pack_native<T: Sample>(
             }
         }
     };
-    luma.par_chunks_mut(2 * w)
-        .zip(cb.par_chunks_mut(cw).zip(cr.par_chunks_mut(cw)))
+    let rows = px.len() / w;
+    let cw = w.div_ceil(2);
+    for (j, (ys, (us, vs))) in luma
+        .chunks_mut(2 * w)
+        .zip(cb.chunks_mut(cw).zip(cr.chunks_mut(cw)))
         .enumerate()
-        .for_each(|(j, (ys, (us, vs)))| {
-            let rows = [2 * j, (2 * j + 1).min(h - 1)];
-            let px: [Vec<[u8; 4]>; 2] = rows.map(|y| (y * w..(y + 1) * w).map(code).collect());
-            for (row, src) in ys.chunks_exact_mut(w).zip(&px) {
-                for (o, p) in row.iter_mut().zip(src) {
-                    *o = if p[3] == 0 { black } else { p[0] };
-                }
+    {
+        let pair = [2 * j, (2 * j + 1).min(rows - 1)];
+        let px: [Vec<[u8; 4]>; 2] = pair.map(|y| (y * w..(y + 1) * w).map(code).collect());
+        for (row, src) in ys.chunks_exact_mut(w).zip(&px) {
+            for (o, p) in row.iter_mut().zip(src) {
+                *o = if p[3] == 0 { black } else { p[0] };
             }
-            let chroma = |p: [u8; 4], c: usize| if p[3] == 0 { 128 } else { u16::from(p[c]) };
-            for (x, (u, v)) in us.iter_mut().zip(vs.iter_mut()).enumerate() {
-                let (a, b) = (2 * x, (2 * x + 1).min(w - 1));
-                let q = [px[0][a], px[0][b], px[1][a], px[1][b]];
-                let mean =
-                    |c: usize| ((q.iter().map(|&p| chroma(p, c)).sum::<u16>() + 2) >> 2) as u8;
-                *u = mean(1);
-                *v = mean(2);
-            }
-        });
-    out
+        }
+        let chroma = |p: [u8; 4], c: usize| if p[3] == 0 { 128 } else { u16::from(p[c]) };
+        for (x, (u, v)) in us.iter_mut().zip(vs.iter_mut()).enumerate() {
+            let (a, b) = (2 * x, (2 * x + 1).min(w - 1));
+            let q = [px[0][a], px[0][b], px[1][a], px[1][b]];
+            let mean = |c: usize| ((q.iter().map(|&p| chroma(p, c)).sum::<u16>() + 2) >> 2) as u8;
+            *u = mean(1);
+            *v = mean(2);
+        }
+    }
 }
 
 /// [`pack_native`] of 8-bit pixels without a blend: plain loops over bytes, no copies.
 fn pack_plain(
     data: &[[u8; 4]],
     w: usize,
-    h: usize,
     black: u8,
     luma: &mut [u8],
     cb: &mut [u8],
     cr: &mut [u8],
 ) {
+    let rows = data.len() / w;
     let cw = w.div_ceil(2);
-    luma.par_chunks_mut(2 * w)
-        .zip(cb.par_chunks_mut(cw).zip(cr.par_chunks_mut(cw)))
+    for (j, (ys, (us, vs))) in luma
+        .chunks_mut(2 * w)
+        .zip(cb.chunks_mut(cw).zip(cr.chunks_mut(cw)))
         .enumerate()
-        .for_each(|(j, (ys, (us, vs)))| {
-            let r0 = &data[2 * j * w..(2 * j + 1) * w];
-            let y1 = (2 * j + 1).min(h - 1);
-            let r1 = &data[y1 * w..(y1 + 1) * w];
-            for (row, src) in ys.chunks_exact_mut(w).zip([r0, r1]) {
-                for (o, p) in row.iter_mut().zip(src) {
-                    *o = if p[3] == 0 { black } else { p[0] };
-                }
+    {
+        let r0 = &data[2 * j * w..(2 * j + 1) * w];
+        let y1 = (2 * j + 1).min(rows - 1);
+        let r1 = &data[y1 * w..(y1 + 1) * w];
+        for (row, src) in ys.chunks_exact_mut(w).zip([r0, r1]) {
+            for (o, p) in row.iter_mut().zip(src) {
+                *o = if p[3] == 0 { black } else { p[0] };
             }
-            let c = |p: &[u8; 4], k: usize| if p[3] == 0 { 128 } else { u16::from(p[k]) };
-            for (((u, v), a), b) in us
-                .iter_mut()
-                .zip(vs.iter_mut())
-                .zip(r0.chunks(2))
-                .zip(r1.chunks(2))
-            {
-                // An odd width's last block repeats its column.
-                let (a1, b1) = (&a[a.len() - 1], &b[b.len() - 1]);
-                let mean = |k| ((c(&a[0], k) + c(a1, k) + c(&b[0], k) + c(b1, k) + 2) >> 2) as u8;
-                *u = mean(1);
-                *v = mean(2);
-            }
-        });
+        }
+        let c = |p: &[u8; 4], k: usize| if p[3] == 0 { 128 } else { u16::from(p[k]) };
+        for (((u, v), a), b) in us
+            .iter_mut()
+            .zip(vs.iter_mut())
+            .zip(r0.chunks(2))
+            .zip(r1.chunks(2))
+        {
+            // An odd width's last block repeats its column.
+            let (a1, b1) = (&a[a.len() - 1], &b[b.len() - 1]);
+            let mean = |k| ((c(&a[0], k) + c(a1, k) + c(&b[0], k) + c(b1, k) + 2) >> 2) as u8;
+            *u = mean(1);
+            *v = mean(2);
+        }
+    }
 }
 
 /// `buf` as a buffer of `len` bytes, every one of which the caller overwrites.
@@ -446,59 +545,63 @@ fn pack_rgba<T: Sample>(img: &Raster<T>, out: Vec<u8>) -> Vec<u8> {
     out
 }
 
-/// 4:2:0 planes of a warped frame: luma per pixel, chroma from the sum of each 2×2 block
-/// (odd sizes repeat the last row or column into it). Row pairs in parallel; each plane's loop
-/// is plain enough for the compiler to vectorise.
-fn pack_yuv<T: Sample>(img: &Raster<T>, e: &Encoder, out: Vec<u8>) -> Vec<u8> {
-    let (w, h) = (img.width, img.height);
+/// A band of a warped frame as 4:2:0 rows: luma per pixel, chroma from the sum of each 2×2
+/// block (odd sizes repeat the last row or column into it). Each plane's loop is plain enough
+/// for the compiler to vectorise.
+fn pack_yuv<T: Sample>(
+    px: &[T],
+    w: usize,
+    e: &Encoder,
+    luma: &mut [u8],
+    cb: &mut [u8],
+    cr: &mut [u8],
+) {
+    let rows = px.len() / w;
     let cw = w.div_ceil(2);
-    let ch = h.div_ceil(2);
-    let mut out = sized(out, super::yuv::frame_len(w, h));
-    let (luma, chroma) = out.split_at_mut(w * h);
-    let (cb, cr) = chroma.split_at_mut(cw * ch);
-    luma.par_chunks_mut(2 * w)
-        .zip(cb.par_chunks_mut(cw).zip(cr.par_chunks_mut(cw)))
+    let rgb = |y: usize| -> Vec<[i32; 3]> {
+        px[y * w..(y + 1) * w]
+            .iter()
+            .map(|p| {
+                let [r, g, b, _] = p.to_rgba8();
+                [i32::from(r), i32::from(g), i32::from(b)]
+            })
+            .collect()
+    };
+    for (j, (ys, (us, vs))) in luma
+        .chunks_mut(2 * w)
+        .zip(cb.chunks_mut(cw).zip(cr.chunks_mut(cw)))
         .enumerate()
-        .for_each(|(j, (ys, (us, vs)))| {
-            let rgb = |y: usize| -> Vec<[i32; 3]> {
-                img.data[y * w..(y + 1) * w]
-                    .iter()
-                    .map(|p| {
-                        let [r, g, b, _] = p.to_rgba8();
-                        [i32::from(r), i32::from(g), i32::from(b)]
-                    })
-                    .collect()
-            };
-            let top = rgb(2 * j);
-            let bottom = if 2 * j + 1 < h {
-                rgb(2 * j + 1)
-            } else {
-                top.clone()
-            };
-            for (k, row) in [&top, &bottom].iter().enumerate().take(ys.len() / w) {
-                for (o, &c) in ys[k * w..(k + 1) * w].iter_mut().zip(row.iter()) {
-                    *o = e.y(c);
-                }
+    {
+        let top = rgb(2 * j);
+        let bottom = if 2 * j + 1 < rows {
+            rgb(2 * j + 1)
+        } else {
+            top.clone()
+        };
+        for (k, row) in [&top, &bottom].iter().enumerate().take(ys.len() / w) {
+            for (o, &c) in ys[k * w..(k + 1) * w].iter_mut().zip(row.iter()) {
+                *o = e.y(c);
             }
-            for x in 0..cw {
-                let (a, b) = (2 * x, (2 * x + 1).min(w - 1));
-                let mut sum = [0i32; 3];
-                for c in [top[a], top[b], bottom[a], bottom[b]] {
-                    sum[0] += c[0];
-                    sum[1] += c[1];
-                    sum[2] += c[2];
-                }
-                let (u, v) = e.uv(sum, true);
-                us[x] = u;
-                vs[x] = v;
+        }
+        for x in 0..cw {
+            let (a, b) = (2 * x, (2 * x + 1).min(w - 1));
+            let mut sum = [0i32; 3];
+            for c in [top[a], top[b], bottom[a], bottom[b]] {
+                sum[0] += c[0];
+                sum[1] += c[1];
+                sum[2] += c[2];
             }
-        });
-    out
+            let (u, v) = e.uv(sum, true);
+            us[x] = u;
+            vs[x] = v;
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rig::apply_gains;
 
     fn frame(w: usize, h: usize) -> Raster<[u8; 4]> {
         Raster::from_fn(w, h, |x, y| {
@@ -512,6 +615,16 @@ mod tests {
         })
     }
 
+    /// A whole frame's 4:2:0 planes, packed as one band.
+    fn whole_native<T: Sample>(img: &Raster<T>, gains: Option<&[f32]>, black: u8) -> Vec<u8> {
+        let (w, h) = (img.width, img.height);
+        let mut out = vec![0; super::super::yuv::frame_len(w, h)];
+        let (luma, chroma) = out.split_at_mut(w * h);
+        let (cb, cr) = chroma.split_at_mut(w.div_ceil(2) * h.div_ceil(2));
+        pack_native(&img.data, w, gains, black, luma, cb, cr);
+        out
+    }
+
     /// The byte loops give what the general path gives (float pixels take it), at even and odd
     /// sizes; empty pixels are black; a blend's gain scales about black and about 128.
     #[test]
@@ -519,14 +632,99 @@ mod tests {
         for (w, h) in [(8, 6), (7, 5)] {
             let bytes = frame(w, h);
             let floats = bytes.map(|p| p.map(|c| f32::from(c) / 255.0));
-            let a = pack_native(&bytes, None, 16, Vec::new());
-            let b = pack_native(&floats, None, 16, Vec::new());
+            let a = whole_native(&bytes, None, 16);
+            let b = whole_native(&floats, None, 16);
             assert_eq!(a, b, "{w}×{h}");
             let empty = (0..w * h).find(|&i| bytes.data[i][3] == 0).unwrap();
             assert_eq!(a[empty], 16);
         }
         let one = Raster::from_fn(2, 2, |_, _| [216u8, 200, 56, 255]);
-        let packed = pack_native(&one, Some(&[0.5; 4]), 16, Vec::new());
+        let packed = whole_native(&one, Some(&[0.5; 4]), 16);
         assert_eq!(packed, vec![116, 116, 116, 116, 164, 92]);
+    }
+
+    /// Packing band by band as the warp draws gives the frame that warping it whole, then
+    /// saturating, blending and packing it whole gives: at an odd size three bands tall, on
+    /// both the Y′CbCr and the R′G′B′ path.
+    #[test]
+    fn packing_each_band_as_it_is_drawn_gives_the_whole_frames_packing() {
+        let image = frame(64, 32);
+        let content = Content::equirect(&image, 360.0, 180.0).unwrap();
+        let view = crate::projection::View::new(
+            crate::projection::build(
+                "cylindrical",
+                &crate::projection::Params {
+                    hfov: Some(270.0),
+                    vfov: Some(90.0),
+                    ..Default::default()
+                },
+                37.0 / 45.0,
+            )
+            .unwrap(),
+            Default::default(),
+            glam::DVec3::ZERO,
+            1.0,
+        )
+        .unwrap();
+        let (w, h) = (45, 37);
+        let plan = Plan::new(
+            crate::render::Warp::View(&view),
+            &content,
+            content.atlas(),
+            w as u32,
+            h as u32,
+            1,
+            crate::render::Filter::Bilinear,
+        )
+        .unwrap();
+        let gains: Vec<f32> = (0..w * h).map(|i| (i % 17) as f32 / 16.0).collect();
+        let saturation: Vec<f32> = (0..w * h).map(|i| (i % 5) as f32 / 4.0).collect();
+        let encoder = Matrix::from_tags(None, None).encoder();
+        for native in [true, false] {
+            let t = Target {
+                plan: Plan::new(
+                    crate::render::Warp::View(&view),
+                    &content,
+                    content.atlas(),
+                    w as u32,
+                    h as u32,
+                    1,
+                    crate::render::Filter::Bilinear,
+                )
+                .unwrap(),
+                size: (w as u32, h as u32),
+                gains: Some(gains.clone()),
+                saturation: (!native).then(|| saturation.clone()),
+                out: OutputSpec {
+                    path: "unused.mp4".into(),
+                    encoding: Default::default(),
+                },
+            };
+            let way = Way {
+                pipe: Pipe::Yuv420,
+                native,
+                black: 16,
+                encoder: &encoder,
+            };
+            let mut buf = Raster::new(w, h);
+            let Packet::Bytes(fused) =
+                warp(&t, content.atlas(), &mut buf, &way, Vec::new(), &mut |_| {}).unwrap()
+            else {
+                panic!("4:2:0 frames are bytes")
+            };
+            let mut img = plan.render(content.atlas()).unwrap();
+            let whole = if native {
+                whole_native(&img, Some(&gains), 16)
+            } else {
+                crate::tiles::raster::saturation(&mut img, &saturation);
+                apply_gains(&mut img, &gains).unwrap();
+                let mut out = vec![0; super::super::yuv::frame_len(w, h)];
+                let (luma, chroma) = out.split_at_mut(w * h);
+                let (cb, cr) = chroma.split_at_mut(w.div_ceil(2) * h.div_ceil(2));
+                pack_yuv(&img.data, w, &encoder, luma, cb, cr);
+                out
+            };
+            assert!(fused == whole, "native {native}: the fused frame differs");
+        }
     }
 }

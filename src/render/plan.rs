@@ -9,10 +9,10 @@ use rayon::prelude::*;
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
-/// Rows per parallel task, and columns per strip within it (see `render_into`). The bilinear
-/// loop takes taller bands, which with its prefetch of the next strip's first row measured
-/// 3–4 % faster at 4K (six paired runs of six) and no slower at 1080p; neither alone helped.
-const BAND_ROWS: usize = 8;
+/// Rows per parallel task, and columns per strip within it (see `Plan::draw`). The bilinear
+/// loop takes taller bands than the 8 rows it had, which with its prefetch of the next strip's
+/// first row measured 3–4 % faster at 4K (six paired runs of six) and no slower at 1080p;
+/// neither alone helped. The other filters draw bands as tall.
 const BILINEAR_BAND_ROWS: usize = 16;
 const STRIP_COLS: usize = 128;
 
@@ -337,6 +337,26 @@ impl Plan {
     /// As [`Plan::render`], into an existing image of the plan's size (no allocation, for
     /// frame loops).
     pub fn render_into<T: Pixel>(&self, atlas: &Atlas<T>, out: &mut Raster<T>) -> Result<()> {
+        let bands = self.height.div_ceil(Self::BAND);
+        self.render_bands(atlas, out, vec![(); bands], |_, _, ()| {})
+    }
+
+    /// Rows of the bands [`Plan::render_bands`] draws (the last may be shorter): even, so that
+    /// a band's 4:2:0 chroma rows are its own.
+    pub const BAND: usize = BILINEAR_BAND_ROWS;
+
+    /// As [`Plan::render_into`], handing each band of [`Plan::BAND`] rows to `then` as soon as
+    /// it is drawn, with its first row and the caller's own piece for it (`pieces`, one per
+    /// band, top to bottom): what follows the warp in a frame loop (a blend, packing for an
+    /// encoder) then reads the band while it is still in the cache, not the whole frame back
+    /// from memory.
+    pub fn render_bands<T: Pixel, P: Send>(
+        &self,
+        atlas: &Atlas<T>,
+        out: &mut Raster<T>,
+        pieces: Vec<P>,
+        then: impl Fn(usize, &mut [T], P) + Sync,
+    ) -> Result<()> {
         if (atlas.width, atlas.height) != (self.atlas_width, self.atlas_height) {
             return Err(Error::invalid(
                 "content",
@@ -353,87 +373,89 @@ impl Plan {
             ));
         }
         let w = self.width;
+        let rows = Self::BAND;
+        assert_eq!(
+            pieces.len(),
+            self.height.div_ceil(rows),
+            "one piece per band"
+        );
+        let kk = (self.supersample * self.supersample) as usize;
+        out.data
+            .par_chunks_mut(w * rows)
+            .zip(self.taps.par_chunks(w * rows * kk))
+            .zip(pieces)
+            .enumerate()
+            .for_each(|(k, ((band, taps), piece))| {
+                self.draw(atlas, band, taps);
+                then(k * rows, band, piece);
+            });
+        Ok(())
+    }
+
+    /// Draws one band of whole rows from its taps.
+    fn draw<T: Pixel>(&self, atlas: &Atlas<T>, band: &mut [T], taps: &[Tap]) {
+        let w = self.width;
         let kk = (self.supersample * self.supersample) as usize;
         let aw = atlas.width;
         let data = &atlas.data[..];
         if self.order == Order::Strips {
-            // Bands of rows walked in short column strips: neighbouring output rows read
+            // A band's rows walked in short column strips: neighbouring output rows read
             // neighbouring texels, so a strip's texels are still in L1 when the next row needs
             // them, whichever way the warp runs through the texture. The taps are stored in
             // this order (`Order::Strips`), so they stream in; a strip's rows, and the strips,
             // follow each other.
-            out.data
-                .par_chunks_mut(w * BILINEAR_BAND_ROWS)
-                .zip(self.taps.par_chunks(w * BILINEAR_BAND_ROWS))
-                .for_each(|(band, taps)| {
-                    let rows = band.len() / w;
-                    for x0 in (0..w).step_by(STRIP_COLS) {
-                        let cols = STRIP_COLS.min(w - x0);
-                        let strip = &taps[x0 * rows..(x0 + cols) * rows];
-                        for r in 0..rows {
-                            let row = &strip[r * cols..(r + 1) * cols];
-                            // The row filtered after the next one (the taps that follow,
-                            // in this strip or the next): its texels are fetched while two
-                            // rows are filtered. One row ahead was enough for the slower
-                            // four-pixel kernel; with the eight-pixel one, two rows ahead
-                            // took 3–9 % less time at 4K (five paired runs), and three or
-                            // more were no better.
-                            // Every other tap is enough (a cache line holds 16 texels) and
-                            // halves the cost.
-                            let at = (x0 * rows + (r + 2) * cols).min(taps.len());
-                            let next = &taps[at..(at + STRIP_COLS).min(taps.len())];
-                            for t in next.iter().step_by(2) {
-                                prefetch(data, t.idx as usize, aw);
-                            }
-                            let span = r * w + x0..r * w + x0 + cols;
-                            T::bilinear_span(data, aw, row, &mut band[span]);
-                        }
+            let rows = band.len() / w;
+            for x0 in (0..w).step_by(STRIP_COLS) {
+                let cols = STRIP_COLS.min(w - x0);
+                let strip = &taps[x0 * rows..(x0 + cols) * rows];
+                for r in 0..rows {
+                    let row = &strip[r * cols..(r + 1) * cols];
+                    // The row filtered after the next one (the taps that follow, in this
+                    // strip or the next): its texels are fetched while two rows are filtered.
+                    // One row ahead was enough for the slower four-pixel kernel; with the
+                    // eight-pixel one, two rows ahead took 3–9 % less time at 4K (five paired
+                    // runs), and three or more were no better.
+                    // Every other tap is enough (a cache line holds 16 texels) and halves the
+                    // cost.
+                    let at = (x0 * rows + (r + 2) * cols).min(taps.len());
+                    let next = &taps[at..(at + STRIP_COLS).min(taps.len())];
+                    for t in next.iter().step_by(2) {
+                        prefetch(data, t.idx as usize, aw);
                     }
-                });
-            return Ok(());
+                    let span = r * w + x0..r * w + x0 + cols;
+                    T::bilinear_span(data, aw, row, &mut band[span]);
+                }
+            }
+            return;
         }
         if self.filter == Filter::Nearest && kk == 1 {
             // One texel per pixel, chosen when the plan was built, copied as it is: no
             // conversion to float and back (the general path below gives the same bits, about
-            // ten times slower).
-            out.data
-                .par_chunks_mut(w * BAND_ROWS)
-                .zip(self.taps.par_chunks(w * BAND_ROWS))
-                .for_each(|(band, taps)| {
-                    // A tap that covers nothing (u32::MAX) lies past the atlas: the default.
-                    for (o, t) in band.iter_mut().zip(taps) {
-                        *o = data.get(t.idx as usize).copied().unwrap_or_default();
-                    }
-                });
-            return Ok(());
+            // ten times slower). A tap that covers nothing (u32::MAX) lies past the atlas: the
+            // default.
+            for (o, t) in band.iter_mut().zip(taps) {
+                *o = data.get(t.idx as usize).copied().unwrap_or_default();
+            }
+            return;
         }
         if self.filter == Filter::Bicubic && kk == 1 {
             // The pixel type's own lookup: fixed point for 8-bit content.
-            out.data
-                .par_chunks_mut(w * BAND_ROWS)
-                .zip(self.taps.par_chunks(w * BAND_ROWS))
-                .for_each(|(band, taps)| T::bicubic_span(data, aw, taps, band));
-            return Ok(());
+            T::bicubic_span(data, aw, taps, band);
+            return;
         }
         let filter = self.filter;
-        out.data
-            .par_chunks_mut(w)
-            .zip(self.taps.par_chunks(w * kk))
-            .for_each(|(row, taps)| {
-                for (o, samples) in row.iter_mut().zip(taps.chunks_exact(kk)) {
-                    let mut acc = [0.0f32; 4];
-                    let mut hits = 0;
-                    for t in samples.iter().filter(|t| t.idx != u32::MAX) {
-                        let v = sample(data, aw, *t, filter);
-                        for (a, c) in acc.iter_mut().zip(v) {
-                            *a += c;
-                        }
-                        hits += 1;
-                    }
-                    *o = finish(acc, hits, kk as u32);
+        for (o, samples) in band.iter_mut().zip(taps.chunks_exact(kk)) {
+            let mut acc = [0.0f32; 4];
+            let mut hits = 0;
+            for t in samples.iter().filter(|t| t.idx != u32::MAX) {
+                let v = sample(data, aw, *t, filter);
+                for (a, c) in acc.iter_mut().zip(v) {
+                    *a += c;
                 }
-            });
-        Ok(())
+                hits += 1;
+            }
+            *o = finish(acc, hits, kk as u32);
+        }
     }
 }
 

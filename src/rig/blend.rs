@@ -150,13 +150,18 @@ pub fn apply_gains<T: Pixel>(img: &mut Raster<T>, gains: &[f32]) -> Result<()> {
     img.data
         .par_iter_mut()
         .zip(gains.par_iter())
-        // Outside the blend zones the gain is 1 and the pixel stays as it is.
-        .filter(|(_, m)| **m != 1.0)
-        .for_each(|(p, &m)| {
-            let v = p.to_f32();
-            *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
-        });
+        .for_each(|(p, &m)| gain(p, m));
     Ok(())
+}
+
+/// One pixel of [`apply_gains`]: its colour times `m`, its alpha kept.
+#[inline]
+pub fn gain<T: Pixel>(p: &mut T, m: f32) {
+    // Outside the blend zones the gain is 1 and the pixel stays as it is.
+    if m != 1.0 {
+        let v = p.to_f32();
+        *p = T::from_f32([v[0] * m, v[1] * m, v[2] * m, v[3]]);
+    }
 }
 
 /// Writes blend weights as a grey PNG (16 or 8 bits) in signal space (m = w^(1/γ)).

@@ -60,18 +60,51 @@ impl Canvas {
     }
 }
 
+/// How a frame lies on a canvas, derived from its projection and view (see
+/// [`Canvas::layout`]): what [`Canvas::content`] builds, and what two canvases must share for
+/// one decode to serve both.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Layout {
+    /// An equirectangular panorama.
+    Equirect {
+        /// Degrees across.
+        hfov: f64,
+        /// Degrees up.
+        vfov: f64,
+        /// The canvas's orientation.
+        turn: crate::projection::Orientation,
+    },
+    /// A cylindrical panorama.
+    Cylindrical {
+        /// Degrees around.
+        hfov: f64,
+        /// Degrees up.
+        vfov: f64,
+        /// The canvas's orientation.
+        turn: crate::projection::Orientation,
+    },
+    /// An equidistant fisheye (a dome master, with a tilt) centred in the frame.
+    Fisheye {
+        /// Degrees across its circle.
+        fov: f64,
+        /// A dome master's forward tilt, degrees.
+        tilt: Option<f64>,
+        /// The circle's radius as a fraction of the frame's width.
+        radius: f64,
+        /// The frame's height ÷ width.
+        aspect: f64,
+        /// The canvas's orientation.
+        turn: crate::projection::Orientation,
+    },
+}
+
 impl Canvas {
-    /// The content an image shows laid out on this canvas (a movie's frame, say), for the
-    /// content kinds the frame loop samples: equirectangular and cylindrical panoramas,
-    /// equidistant fisheyes and dome masters, at zoom 1 and on axis. The image may have any
-    /// size: its edges are the canvas's, as the 2d exports' coordinates say (a fisheye's
-    /// must have the canvas's aspect, so that its circle stays round). Errors name the
-    /// canvas's field.
-    pub fn content<T: crate::raster::Pixel>(
-        &self,
-        image: &crate::raster::Raster<T>,
-    ) -> crate::Result<crate::content::Content<T>> {
-        use crate::content::{Content, Fisheye};
+    /// How a frame of `w`×`h` pixels lies on this canvas, for the content kinds the frame loop
+    /// samples: equirectangular and cylindrical panoramas, equidistant fisheyes and dome
+    /// masters, at zoom 1 and on axis. The frame's edges are the canvas's, as the 2d exports'
+    /// coordinates say; a fisheye's frame must have the canvas's aspect (to a pixel) and the
+    /// canvas square pixels, so that its circle stays round. Errors name the canvas's field.
+    pub fn layout(&self, (w, h): (usize, usize)) -> crate::Result<Layout> {
         use crate::projection::Orientation;
         let view = self.view()?;
         if self.zoom != 1.0 || self.offaxis != [0.0; 3] {
@@ -92,44 +125,94 @@ impl Canvas {
         let projection = view.projection();
         let form = projection.shader_form();
         let deg = f64::to_degrees;
-        let content = match (form.kind, form.radial) {
-            (3, _) => Content::equirect(image, deg(2.0 * form.p[0]), deg(2.0 * form.p[1])),
-            (1, _) => {
-                Content::cylindrical(image, deg(2.0 * form.p[0]), deg(2.0 * form.p[1].atan()))
-            }
+        Ok(match (form.kind, form.radial) {
+            (3, _) => Layout::Equirect {
+                hfov: deg(2.0 * form.p[0]),
+                vfov: deg(2.0 * form.p[1]),
+                turn,
+            },
+            (1, _) => Layout::Cylindrical {
+                hfov: deg(2.0 * form.p[0]),
+                vfov: deg(2.0 * form.p[1].atan()),
+                turn,
+            },
             (4, 0) => {
-                let (w, h) = (image.width as f64, image.height as f64);
+                let (w, h) = (w as f64, h as f64);
                 let [cw, ch] = self.size.map(f64::from);
-                if ((w / h) / (cw / ch) - 1.0).abs() > 0.01 {
+                let (sx, sy, theta_max) = (form.p[0], form.p[1], form.p[2]);
+                // θ = r per unit of s and t: sx radians over half the width, sy over half the
+                // height; equal radians per pixel both ways keep the circle round.
+                if (sx * ch / (sy * cw) - 1.0).abs() > 1e-6 {
                     return Err(crate::Error::invalid(
-                        "/size",
+                        "/params",
                         format!(
-                            "a fisheye's frame must have the canvas's aspect ratio: the frame is \
-                             {w}×{h}, the canvas {cw}×{ch}"
+                            "the fisheye's fields of view give its {cw}×{ch} canvas pixels of two                              sizes; a movie is laid out on a fisheye canvas with square pixels"
                         ),
                     ));
                 }
-                // θ = r per unit of s: half the frame's width is sx radians from the centre.
-                let (sx, theta_max) = (form.p[0], form.p[2]);
-                let tilt =
-                    (projection.name() == "domemaster").then(|| self.params.tilt.unwrap_or(0.0));
-                let f = Fisheye {
+                if (w * ch / cw - h).abs() > 1.0 {
+                    return Err(crate::Error::invalid(
+                        "/size",
+                        format!(
+                            "a fisheye's frame must have the canvas's aspect ratio: the frame is                              {w}×{h}, the canvas {cw}×{ch}"
+                        ),
+                    ));
+                }
+                Layout::Fisheye {
                     fov: deg(2.0 * theta_max).min(360.0),
-                    tilt,
-                    centre: Some([w / 2.0, h / 2.0]),
-                    radius: Some(theta_max / sx * w / 2.0),
-                };
-                Content::fisheye(image, &f)
+                    tilt: (projection.name() == "domemaster")
+                        .then(|| self.params.tilt.unwrap_or(0.0)),
+                    radius: theta_max / sx / 2.0,
+                    aspect: ch / cw,
+                    turn,
+                }
             }
             _ => {
                 return Err(crate::Error::invalid(
                     "/projection",
                     format!(
-                        "a movie is laid out on equirect, cylindrical, fisheye (equidistant) and \
-                         domemaster canvases, not `{}`",
+                        "a movie is laid out on equirect, cylindrical, fisheye (equidistant) and                          domemaster canvases, not `{}`",
                         projection.name()
                     ),
                 ));
+            }
+        })
+    }
+
+    /// The content an image shows laid out on this canvas (a movie's frame, say): see
+    /// [`Canvas::layout`].
+    pub fn content<T: crate::raster::Pixel>(
+        &self,
+        image: &crate::raster::Raster<T>,
+    ) -> crate::Result<crate::content::Content<T>> {
+        use crate::content::{Content, Fisheye};
+        let layout = self.layout((image.width, image.height))?;
+        let (content, turn) = match layout {
+            Layout::Equirect { hfov, vfov, turn } => {
+                // A derived field of view a rounding above the whole sphere is the whole sphere.
+                (
+                    Content::equirect(image, hfov.min(360.0), vfov.min(180.0)),
+                    turn,
+                )
+            }
+            Layout::Cylindrical { hfov, vfov, turn } => {
+                (Content::cylindrical(image, hfov.min(360.0), vfov), turn)
+            }
+            Layout::Fisheye {
+                fov,
+                tilt,
+                radius,
+                turn,
+                ..
+            } => {
+                let (w, h) = (image.width as f64, image.height as f64);
+                let f = Fisheye {
+                    fov,
+                    tilt,
+                    centre: Some([w / 2.0, h / 2.0]),
+                    radius: Some(radius * w),
+                };
+                (Content::fisheye(image, &f), turn)
             }
         };
         Ok(content

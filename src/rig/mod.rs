@@ -15,11 +15,11 @@ pub mod schema;
 mod tiles;
 mod warp;
 
-pub use canvas::Canvas;
+pub use canvas::{Canvas, Layout};
 pub use coverage::Coverage;
 pub use plan::{ChannelPlan, Overlap, Plan, PointPlan, WallPlan};
 
-pub use blend::{BlendOptions, apply_gains, blend_png_bytes, signal_gains, write_blend_png};
+pub use blend::{BlendOptions, apply_gains, blend_png_bytes, gain, signal_gains, write_blend_png};
 pub use tiles::{SAMPLED_COLUMNS, default_rows};
 pub use warp::ChannelWarp;
 

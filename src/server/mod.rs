@@ -247,14 +247,16 @@ pub async fn launch(
     }
     drop(listener);
     state.stopping.send_replace(true);
-    // A render job stops between frames and removes what it had written, its ffmpeg children
-    // with it, before the process ends.
-    state.renders.stop_all(DRAIN).await;
-    tokio::select! {
-        () = graceful.shutdown() => {}
-        () = tokio::time::sleep(DRAIN) => {
-            tracing::warn!("requests still running after {} s; stopping anyway", DRAIN.as_secs());
+    // Alongside the requests' drain, render jobs stop (and no new one is taken): the running
+    // one between frames, removing what it had written, its ffmpeg children with it.
+    let requests = async {
+        tokio::select! {
+            () = graceful.shutdown() => {}
+            () = tokio::time::sleep(DRAIN) => {
+                tracing::warn!("requests still running after {} s; stopping anyway", DRAIN.as_secs());
+            }
         }
-    }
+    };
+    tokio::join!(requests, state.renders.stop_all(DRAIN));
     Ok(())
 }

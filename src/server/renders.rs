@@ -139,6 +139,24 @@ pub struct Work {
 struct Entry {
     record: Mutex<Record>,
     stop: AtomicBool,
+    /// Held from reading the record to having kept and announced it, so that two changes
+    /// are kept in the order they were made.
+    saving: Mutex<()>,
+}
+
+impl Entry {
+    fn new(record: Record) -> Arc<Entry> {
+        Arc::new(Entry {
+            record: Mutex::new(record),
+            stop: AtomicBool::new(false),
+            saving: Mutex::new(()),
+        })
+    }
+
+    /// The record, also after a panic elsewhere left its lock poisoned.
+    fn record(&self) -> std::sync::MutexGuard<'_, Record> {
+        self.record.lock().unwrap_or_else(|e| e.into_inner())
+    }
 }
 
 /// The daemon's render jobs and its media folder.
@@ -149,6 +167,8 @@ pub struct Renders {
     next: AtomicU64,
     /// One job runs at a time: a movie keeps every core busy by itself.
     turn: Arc<tokio::sync::Semaphore>,
+    /// Set when the daemon shuts down: no job is taken or started after it.
+    closed: AtomicBool,
 }
 
 /// The `job.json` name in a job's folder.
@@ -160,32 +180,71 @@ fn now_ms() -> i64 {
         .map_or(0, |d| d.as_millis() as i64)
 }
 
+/// Containers a job writes.
+pub const CONTAINERS: [&str; 4] = ["mp4", "mov", "mkv", "nut"];
+
+/// Whether a record read back from disk names only what a job of its own makes: its own
+/// folder's number, a known container, and files `<channel>.<container>` or
+/// `<channel>-blend.png` of its channels (a hand-edited record could otherwise point a
+/// download anywhere).
+fn sound(record: &Record, dir: &Path) -> bool {
+    let plain = |c: &str| {
+        !c.is_empty()
+            && c.bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b"._-".contains(&b))
+            && !c.starts_with('.')
+    };
+    dir.file_name() == Some(std::ffi::OsStr::new(&record.id.to_string()))
+        && CONTAINERS.contains(&record.container.as_str())
+        && record.channels.iter().all(|c| plain(c))
+        && record.files.iter().all(|f| {
+            record.channels.contains(&f.channel)
+                && (f.name == format!("{}.{}", f.channel, record.container)
+                    || f.name == format!("{}-blend.png", f.channel))
+        })
+}
+
+/// Whether `path` is a real folder, not a symbolic link to one.
+fn real_dir(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir())
+}
+
 impl Renders {
     /// The jobs kept under `folder`'s `renders/`; a job the daemon stopped in is marked failed
-    /// and its partial files removed. Records that cannot be read are left alone, with a
-    /// warning.
+    /// and its partial files removed. Records that cannot be read, name what their job could
+    /// not have made, or sit behind a symbolic link are left alone, with a warning.
     pub fn open(folder: Option<&Path>) -> Renders {
         let mut jobs = BTreeMap::new();
-        if let Some(root) = folder.map(|f| f.join("renders"))
-            && let Ok(dirs) = std::fs::read_dir(&root)
-        {
-            for dir in dirs.flatten().map(|d| d.path()) {
+        let mut taken = 0;
+        let root = folder.map(|f| f.join("renders"));
+        if let Some(root) = root.as_ref().filter(|r| r.exists() && !real_dir(r)) {
+            tracing::warn!(path = %root.display(), "renders/ is not a folder of its own; no job is read from it");
+        } else if let Some(dirs) = root.and_then(|r| std::fs::read_dir(r).ok()) {
+            let dirs: Vec<PathBuf> = dirs.flatten().map(|d| d.path()).collect();
+            // New jobs take numbers after every folder there, read or not.
+            taken = dirs
+                .iter()
+                .filter_map(|d| d.file_name()?.to_str()?.parse::<u64>().ok())
+                .max()
+                .unwrap_or(0);
+            for dir in dirs.into_iter().filter(|d| real_dir(d)) {
                 let path = dir.join(RECORD);
                 let Ok(text) = std::fs::read(&path) else {
                     continue;
                 };
                 let mut record: Record = match serde_json::from_slice(&text) {
-                    Ok(r) => r,
+                    Ok(r) if sound(&r, &dir) => r,
+                    Ok(_) => {
+                        tracing::warn!(path = %path.display(), "a render job's record names files its job could not have made; left alone");
+                        continue;
+                    }
                     Err(e) => {
                         tracing::warn!(path = %path.display(), error = %e, "a render job's record cannot be read; left alone");
                         continue;
                     }
                 };
-                if dir.file_name() != Some(std::ffi::OsStr::new(&record.id.to_string())) {
-                    continue;
-                }
                 if !record.state.finished() {
-                    clear(&dir, &[]);
+                    clear(&dir);
                     record.state = State::Failed;
                     record.finished_ms = Some(now_ms());
                     record.files.clear();
@@ -199,38 +258,35 @@ impl Renders {
                         tracing::warn!(error = %e, "cannot mark an interrupted render job failed");
                     }
                 }
-                jobs.insert(
-                    record.id,
-                    Arc::new(Entry {
-                        record: Mutex::new(record),
-                        stop: AtomicBool::new(false),
-                    }),
-                );
+                jobs.insert(record.id, Entry::new(record));
             }
         }
-        let next = jobs.keys().next_back().map_or(1, |k| k + 1);
+        let next = taken.max(jobs.keys().next_back().copied().unwrap_or(0)) + 1;
         Renders {
             folder: folder.map(Path::to_path_buf),
             jobs: Mutex::new(jobs),
             next: AtomicU64::new(next),
             turn: Arc::new(tokio::sync::Semaphore::new(1)),
+            closed: AtomicBool::new(false),
         }
+    }
+
+    fn jobs(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Arc<Entry>>> {
+        self.jobs.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Every job, newest first.
     pub fn list(&self) -> Vec<Record> {
-        let jobs = self.jobs.lock().expect("jobs lock");
-        jobs.values()
+        self.jobs()
+            .values()
             .rev()
-            .map(|e| e.record.lock().expect("job lock").clone())
+            .map(|e| e.record().clone())
             .collect()
     }
 
     /// Job `id` as it stands.
     pub fn get(&self, id: u64) -> Option<Record> {
-        let jobs = self.jobs.lock().expect("jobs lock");
-        jobs.get(&id)
-            .map(|e| e.record.lock().expect("job lock").clone())
+        self.jobs().get(&id).map(|e| e.record().clone())
     }
 
     /// The folder of job `id`.
@@ -240,60 +296,68 @@ impl Renders {
             .map(|f| f.join("renders").join(id.to_string()))
     }
 
-    /// Takes a new job, queued, if the limits leave room: `Err(true)` when too many wait,
-    /// `Err(false)` when the list is full.
-    fn admit(&self, mut record: Record) -> Result<(Arc<Entry>, PathBuf), bool> {
-        let mut jobs = self.jobs.lock().expect("jobs lock");
+    /// Whether a new job would be taken: `Err(true)` when too many wait (or the daemon is
+    /// shutting down), `Err(false)` when the list is full.
+    pub fn room(&self) -> Result<(), bool> {
+        Self::room_in(&self.jobs(), &self.closed)
+    }
+
+    fn room_in(jobs: &BTreeMap<u64, Arc<Entry>>, closed: &AtomicBool) -> Result<(), bool> {
         let active = jobs
             .values()
-            .filter(|e| !e.record.lock().expect("job lock").state.finished())
+            .filter(|e| !e.record().state.finished())
             .count();
-        if active > crate::limits::RENDER_JOBS_WAITING {
+        if active > crate::limits::RENDER_JOBS_WAITING || closed.load(Ordering::Relaxed) {
             return Err(true);
         }
         if jobs.len() >= crate::limits::RENDER_JOBS {
             return Err(false);
         }
+        Ok(())
+    }
+
+    /// Takes a new job, queued, if [`Renders::room`] says so.
+    fn admit(&self, mut record: Record) -> Result<(Arc<Entry>, PathBuf), bool> {
+        let mut jobs = self.jobs();
+        Self::room_in(&jobs, &self.closed)?;
         record.id = self.next.fetch_add(1, Ordering::Relaxed);
         let dir = self
             .dir(record.id)
             .expect("admitted only with a media folder");
-        let entry = Arc::new(Entry {
-            record: Mutex::new(record.clone()),
-            stop: AtomicBool::new(false),
-        });
+        let entry = Entry::new(record.clone());
         jobs.insert(record.id, entry.clone());
         Ok((entry, dir))
     }
 
-    /// Forgets finished job `id`; its record, or `Err` with it when it has not finished.
-    pub fn remove(&self, id: u64) -> Option<Result<Record, Record>> {
-        let mut jobs = self.jobs.lock().expect("jobs lock");
-        let record = jobs.get(&id)?.record.lock().expect("job lock").clone();
-        if !record.state.finished() {
-            return Some(Err(record));
-        }
-        jobs.remove(&id);
-        Some(Ok(record))
+    /// Whether job `id` has ended, so that it may be deleted: `Err` with its record when it
+    /// has not.
+    pub fn ended(&self, id: u64) -> Option<Result<(), Record>> {
+        let record = self.jobs().get(&id)?.record().clone();
+        Some(if record.state.finished() {
+            Ok(())
+        } else {
+            Err(record)
+        })
     }
 
-    /// Stops every job (the daemon is shutting down) and waits up to `wait` for the running
-    /// one to clean up after itself.
+    /// Forgets job `id` (its folder already removed).
+    pub fn forget(&self, id: u64) {
+        self.jobs().remove(&id);
+    }
+
+    /// Stops every job and takes no more (the daemon is shutting down), then waits up to
+    /// `wait` for the running one to clean up after itself.
     pub async fn stop_all(&self, wait: std::time::Duration) {
-        let entries: Vec<_> = self
-            .jobs
-            .lock()
-            .expect("jobs lock")
-            .values()
-            .cloned()
-            .collect();
+        let entries: Vec<_> = {
+            let jobs = self.jobs();
+            self.closed.store(true, Ordering::Relaxed);
+            jobs.values().cloned().collect()
+        };
         for e in &entries {
             e.stop.store(true, Ordering::Relaxed);
         }
         let until = tokio::time::Instant::now() + wait;
-        while entries
-            .iter()
-            .any(|e| e.record.lock().expect("job lock").state == State::Running)
+        while entries.iter().any(|e| e.record().state == State::Running)
             && tokio::time::Instant::now() < until
         {
             tokio::time::sleep(std::time::Duration::from_millis(20)).await;
@@ -309,95 +373,125 @@ fn save(dir: &Path, record: &Record) -> crate::Result<()> {
     })
 }
 
-/// Removes every file of a job's folder but its record and `keep`.
-fn clear(dir: &Path, keep: &[String]) {
+/// Removes every file of a job's folder but its record.
+fn clear(dir: &Path) {
     if let Ok(files) = std::fs::read_dir(dir) {
         for f in files.flatten() {
-            let name = f.file_name().to_string_lossy().into_owned();
-            if name != RECORD && !keep.contains(&name) {
+            if f.file_name() != RECORD {
                 let _ = std::fs::remove_file(f.path());
             }
         }
     }
 }
 
-/// Queues `record` for `work` and starts it when its turn comes: the queued record, `Err(true)`
-/// when too many wait, `Err(false)` when the list is full.
-pub fn submit(
+/// Queues `record` for `work`, kept on disk before this returns, and starts it when its turn
+/// comes: the queued record, `Err(true)` when too many wait, `Err(false)` when the list is
+/// full.
+pub async fn submit(
     s: &Arc<super::AppState>,
     record: Record,
     work: Work,
     blend: Blend,
 ) -> Result<Record, bool> {
     let (entry, dir) = s.renders.admit(record)?;
-    let queued = entry.record.lock().expect("job lock").clone();
-    let state = s.clone();
-    tokio::spawn(async move {
-        let (st, e, d) = (state.clone(), entry.clone(), dir.clone());
-        let _ = tokio::task::spawn_blocking(move || update(&st, &e, &d, |_| {})).await;
-        // Its turn, then a worker permit for the whole run (previews keep the others).
-        let turn = state.renders.turn.clone().acquire_owned().await;
-        let permit = state.workers.clone().acquire_owned().await;
-        let (Ok(_turn), Ok(permit)) = (turn, permit) else {
-            return;
+    let queued = entry.record().clone();
+    let (st, e, d) = (s.clone(), entry.clone(), dir.clone());
+    let _ = tokio::task::spawn_blocking(move || update(&st, &e, &d, |_| {})).await;
+    tokio::spawn(turn(s.clone(), entry, dir, work, blend));
+    Ok(queued)
+}
+
+/// A job from the queue to its end: its turn, a worker permit for the whole run (previews
+/// keep the others), the run on the blocking pool, the outcome kept.
+async fn turn(s: Arc<super::AppState>, entry: Arc<Entry>, dir: PathBuf, work: Work, blend: Blend) {
+    let turn = s.renders.turn.clone().acquire_owned().await;
+    let permit = s.workers.clone().acquire_owned().await;
+    let (Ok(_turn), Ok(permit)) = (turn, permit) else {
+        return;
+    };
+    let (st, e, d) = (s.clone(), entry.clone(), dir.clone());
+    let ran = tokio::task::spawn_blocking(move || {
+        let _permit = permit;
+        let started = {
+            let mut r = e.record();
+            let go = r.state == State::Queued
+                && !e.stop.load(Ordering::Relaxed)
+                && !st.renders.closed.load(Ordering::Relaxed);
+            if go {
+                r.state = State::Running;
+            }
+            go
         };
-        let _ = tokio::task::spawn_blocking(move || {
-            let _permit = permit;
-            let started = {
-                let mut r = entry.record.lock().expect("job lock");
-                let go = r.state == State::Queued && !entry.stop.load(Ordering::Relaxed);
-                if go {
-                    r.state = State::Running;
+        if !started {
+            // Cancelled while it waited (the cancel kept that), or the daemon is stopping.
+            return None;
+        }
+        update(&st, &e, &d, |_| {});
+        Some(run(&st, &e, &d, work, blend))
+    })
+    .await;
+    let outcome = match ran {
+        Ok(None) => return,
+        Ok(Some(outcome)) => outcome,
+        // A panic in the frame loop: the job ends failed, not running for ever.
+        Err(e) => {
+            tracing::error!(error = %e, "a render job stopped on an internal error");
+            Err(crate::Error::invalid(
+                "job",
+                "the job stopped on an internal error; the daemon's log has its detail",
+            ))
+        }
+    };
+    let stopping = *s.stopping.borrow();
+    let folder = s.renders.folder.clone().unwrap_or_default();
+    let _ = tokio::task::spawn_blocking(move || {
+        if outcome.is_err() {
+            clear(&dir);
+        }
+        update(&s, &entry, &dir, |r| {
+            r.finished_ms = Some(now_ms());
+            r.eta_seconds = None;
+            match outcome {
+                Ok(files) => {
+                    r.state = State::Done;
+                    r.files = files;
                 }
-                go
-            };
-            if !started {
-                // Cancelled while it waited: the cancel recorded it.
-                return;
-            }
-            update(&state, &entry, &dir, |_| {});
-            let outcome = run(&state, &entry, &dir, work, blend);
-            let stopping = *state.stopping.borrow();
-            if outcome.is_err() {
-                clear(&dir, &[]);
-            }
-            update(&state, &entry, &dir, |r| {
-                r.finished_ms = Some(now_ms());
-                r.eta_seconds = None;
-                match outcome {
-                    Ok(files) => {
-                        r.state = State::Done;
-                        r.files = files;
-                    }
-                    Err(crate::Error::Cancelled) => {
-                        r.state = State::Cancelled;
-                        if stopping {
-                            r.error = Some(Failure {
-                                field: None,
-                                reason: "the daemon was stopped".into(),
-                            });
-                        }
-                    }
-                    Err(e) => {
-                        tracing::warn!(job = r.id, error = %e, "render job failed");
-                        r.state = State::Failed;
-                        r.error = Some(match e {
-                            crate::Error::Invalid { name, reason } => Failure {
-                                field: Some(name),
-                                reason,
-                            },
-                            other => Failure {
-                                field: None,
-                                reason: other.to_string(),
-                            },
+                Err(crate::Error::Cancelled) => {
+                    r.state = State::Cancelled;
+                    if stopping {
+                        r.error = Some(Failure {
+                            field: None,
+                            reason: "the daemon was stopped".into(),
                         });
                     }
                 }
-            });
-        })
-        .await;
-    });
-    Ok(queued)
+                Err(e) => {
+                    tracing::warn!(job = r.id, error = %e, "render job failed");
+                    r.state = State::Failed;
+                    let (field, reason) = match e {
+                        crate::Error::Invalid { name, reason } => (Some(name), reason),
+                        other => (None, other.to_string()),
+                    };
+                    r.error = Some(Failure {
+                        field,
+                        reason: private(&reason, &folder),
+                    });
+                }
+            }
+        });
+    })
+    .await;
+}
+
+/// `reason` without where the media folder is: paths in it as the client names them.
+pub fn private(reason: &str, folder: &Path) -> String {
+    let folder = folder.display().to_string();
+    if folder.is_empty() {
+        return reason.to_string();
+    }
+    reason
+        .replace(&format!("{folder}/"), "")
+        .replace(&folder, "the media folder")
 }
 
 /// Asks job `id` to stop and waits (up to `wait`) until it has: a queued job is cancelled at
@@ -407,16 +501,10 @@ pub async fn cancel(
     id: u64,
     wait: std::time::Duration,
 ) -> Option<Record> {
-    let entry = s
-        .renders
-        .jobs
-        .lock()
-        .expect("jobs lock")
-        .get(&id)
-        .cloned()?;
+    let entry = s.renders.jobs().get(&id).cloned()?;
     entry.stop.store(true, Ordering::Relaxed);
     let was_queued = {
-        let mut r = entry.record.lock().expect("job lock");
+        let mut r = entry.record();
         let queued = r.state == State::Queued;
         if queued {
             r.state = State::Cancelled;
@@ -430,7 +518,7 @@ pub async fn cancel(
     }
     let until = tokio::time::Instant::now() + wait;
     loop {
-        let r = entry.record.lock().expect("job lock").clone();
+        let r = entry.record().clone();
         if r.state.finished() || tokio::time::Instant::now() >= until {
             return Some(r);
         }
@@ -438,10 +526,11 @@ pub async fn cancel(
     }
 }
 
-/// Changes a job's record, keeps it and announces it.
+/// Changes a job's record, keeps it and announces it, in the order the changes are made.
 fn update(s: &super::AppState, entry: &Entry, dir: &Path, change: impl FnOnce(&mut Record)) {
+    let _order = entry.saving.lock().unwrap_or_else(|e| e.into_inner());
     let record = {
-        let mut r = entry.record.lock().expect("job lock");
+        let mut r = entry.record();
         change(&mut r);
         r.clone()
     };
@@ -471,7 +560,7 @@ fn run(
     blend: Blend,
 ) -> crate::Result<Vec<File>> {
     std::fs::create_dir_all(dir).map_err(|e| crate::Error::file(dir, e))?;
-    let ext = entry.record.lock().expect("job lock").container.clone();
+    let ext = entry.record().container.clone();
     let name = |id: &str| format!("{id}.{ext}");
     let mut blends = Vec::new();
     let mut outputs = Vec::new();
@@ -504,7 +593,7 @@ fn run(
     let mut last = std::time::Instant::now();
     let progress = |p: Progress| {
         let fps = p.frame as f64 / p.elapsed.as_secs_f64().max(1e-9);
-        let mut r = entry.record.lock().expect("job lock");
+        let mut r = entry.record();
         r.frame = p.frame;
         r.fps = Some((fps * 100.0).round() / 100.0);
         r.eta_seconds = p

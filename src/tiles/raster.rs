@@ -329,14 +329,19 @@ pub fn saturation<T: crate::raster::Pixel>(img: &mut Raster<T>, f: &[f32]) {
     img.data
         .par_iter_mut()
         .zip(f.par_iter())
-        // At full saturation (f ≥ 1, clamped) a pixel stays as it is: y + (r − y) is r to
-        // within an ulp, which rounds back to r in 8 bits (and float pixels keep r itself).
-        .filter(|(_, s)| **s < 1.0)
-        .for_each(|(p, &s)| {
-            let [r, g, b, a] = p.to_f32();
-            // Rec. 709 luma: the grey a desaturated pixel falls to.
-            let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
-            let s = s.clamp(0.0, 1.0);
-            *p = T::from_f32([y + (r - y) * s, y + (g - y) * s, y + (b - y) * s, a]);
-        });
+        .for_each(|(p, &s)| saturate(p, s));
+}
+
+/// One pixel of [`saturation`].
+#[inline]
+pub fn saturate<T: crate::raster::Pixel>(p: &mut T, s: f32) {
+    // At full saturation (f ≥ 1, clamped) a pixel stays as it is: y + (r − y) is r to within
+    // an ulp, which rounds back to r in 8 bits (and float pixels keep r itself).
+    if s < 1.0 {
+        let [r, g, b, a] = p.to_f32();
+        // Rec. 709 luma: the grey a desaturated pixel falls to.
+        let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
+        let s = s.clamp(0.0, 1.0);
+        *p = T::from_f32([y + (r - y) * s, y + (g - y) * s, y + (b - y) * s, a]);
+    }
 }

@@ -131,7 +131,11 @@ fn a_frame_on_a_canvas_reads_where_the_canvas_projection_says() {
             inside > 2000,
             "{json}: only {inside} directions checked inside"
         );
-        let _ = outside;
+        let whole = json.contains(r#""hfov": 360, "vfov": 180"#);
+        assert!(
+            whole || outside > 500,
+            "{json}: only {outside} directions checked outside"
+        );
     }
 }
 
@@ -153,6 +157,11 @@ fn canvases_a_movie_cannot_use_are_refused_by_field() {
             "/zoom",
         ),
         (r#"{"projection": "domemaster", "size": [64, 64]}"#, "/size"),
+        // Fields of view that make the canvas's pixels oblong: the circle would be an ellipse.
+        (
+            r#"{"projection": "fisheye", "params": {"hfov": 180, "vfov": 180}, "size": [128, 64]}"#,
+            "/params",
+        ),
     ] {
         match canvas(json).content(&frame) {
             Err(omniwarp::Error::Invalid { name, .. }) => assert_eq!(name, field, "{json}"),

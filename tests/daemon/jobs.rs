@@ -175,16 +175,27 @@ async fn a_sequence_renders_every_channel_as_each_frames_still() {
     assert_eq!(status, StatusCode::NOT_FOUND);
 }
 
+/// A request without a body: its status and JSON answer.
+async fn send(s: &Arc<AppState>, method: &str, uri: &str) -> (StatusCode, Value) {
+    let (status, _, b) = call(s, write(method, uri, None, String::new())).await;
+    (status, serde_json::from_slice(&b).unwrap_or(Value::Null))
+}
+
 /// A movie job cancelled mid-run stops, leaves only its record, and cannot be deleted while it
-/// runs; the blend can go beside the movie instead of into it.
+/// runs; four jobs wait behind it and a fifth is told to come back, a waiting one is cancelled
+/// at once; the blend can go beside the movie instead of into it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_cancelled_movie_leaves_nothing_and_a_separate_blend_goes_beside() {
+async fn a_cancelled_movie_leaves_nothing_and_jobs_wait_their_turn() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     ffmpeg(
         d,
         "-f lavfi -i testsrc2=size=512x256:rate=30 -frames:v 1500 -c:v libx264 -preset ultrafast \
          -pix_fmt yuv420p long.mp4",
+    );
+    ffmpeg(
+        d,
+        "-f lavfi -i testsrc2=size=256x128:rate=30 -frames:v 3 -pix_fmt yuv420p -c:v libx264 short.mp4",
     );
     let s = state(Some(d));
     let (status, r) = post(
@@ -196,8 +207,7 @@ async fn a_cancelled_movie_leaves_nothing_and_a_separate_blend_goes_beside() {
     let id = r["id"].as_u64().unwrap();
     let start = Instant::now();
     loop {
-        let (_, _, b) = call(&s, get(&format!("/v1/jobs/{id}"))).await;
-        let r = json(&b);
+        let (_, r) = send(&s, "GET", &format!("/v1/jobs/{id}")).await;
         if r["state"] == "running" && r["frame"].as_u64().unwrap() > 0 {
             break;
         }
@@ -205,45 +215,48 @@ async fn a_cancelled_movie_leaves_nothing_and_a_separate_blend_goes_beside() {
         assert!(start.elapsed() < Duration::from_secs(60));
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
-    let (status, _, _) = call(
-        &s,
-        write("DELETE", &format!("/v1/jobs/{id}"), None, String::new()),
-    )
-    .await;
+    let (status, _) = send(&s, "DELETE", &format!("/v1/jobs/{id}")).await;
     assert_eq!(status, StatusCode::CONFLICT);
-    let (status, _, b) = call(
-        &s,
-        write(
-            "POST",
-            &format!("/v1/jobs/{id}/cancel"),
-            None,
-            String::new(),
-        ),
-    )
-    .await;
-    assert_eq!(status, StatusCode::OK);
-    assert_eq!(json(&b)["state"], "cancelled", "{}", json(&b));
+    let mut waiting = Vec::new();
+    for _ in 0..4 {
+        let (status, r) = post(
+            &s,
+            serde_json::json!({"content": "short.mp4", "channels": ["left"]}),
+        )
+        .await;
+        assert_eq!(
+            (status, r["state"].as_str()),
+            (StatusCode::ACCEPTED, Some("queued")),
+            "{r}"
+        );
+        waiting.push(r["id"].as_u64().unwrap());
+    }
+    let (status, b) = post(&s, serde_json::json!({"content": "short.mp4"})).await;
+    assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE, "{b}");
+    let (status, r) = send(&s, "POST", &format!("/v1/jobs/{}/cancel", waiting[0])).await;
+    assert_eq!(
+        (status, r["state"].as_str()),
+        (StatusCode::OK, Some("cancelled")),
+        "{r}"
+    );
+    let (status, r) = send(&s, "POST", &format!("/v1/jobs/{id}/cancel")).await;
+    assert_eq!(
+        (status, r["state"].as_str()),
+        (StatusCode::OK, Some("cancelled")),
+        "{r}"
+    );
     let left: Vec<String> = std::fs::read_dir(d.join("renders").join(id.to_string()))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(left, ["job.json"]);
-    let (status, _, _) = call(
-        &s,
-        write(
-            "POST",
-            &format!("/v1/jobs/{id}/cancel"),
-            None,
-            String::new(),
-        ),
-    )
-    .await;
+    let (status, _) = send(&s, "POST", &format!("/v1/jobs/{id}/cancel")).await;
     assert_eq!(status, StatusCode::CONFLICT);
+    for id in &waiting[1..] {
+        assert_eq!(ended(&s, *id).await["state"], "done");
+    }
+    assert_eq!(ended(&s, waiting[0]).await["state"], "cancelled");
 
-    ffmpeg(
-        d,
-        "-f lavfi -i testsrc2=size=256x128:rate=30 -frames:v 3 -pix_fmt yuv420p -c:v libx264 short.mp4",
-    );
     let (status, r) = post(
         &s,
         serde_json::json!({"content": "short.mp4", "channels": ["right"], "blend": "separate",
@@ -285,6 +298,15 @@ async fn bad_jobs_are_refused_by_field() {
         d,
         "-f lavfi -i testsrc2=size=64x32:rate=15 -frames:v 2 ok.mkv",
     );
+    // A sequence whose second frame is a link to a file elsewhere.
+    std::fs::create_dir(d.join("shots")).unwrap();
+    ffmpeg(
+        d,
+        "-f lavfi -i testsrc2=size=64x32:rate=15 -frames:v 2 -start_number 1 shots/f-%03d.png",
+    );
+    let away = outside.path().join("f-002.png");
+    std::fs::rename(d.join("shots/f-002.png"), &away).unwrap();
+    std::os::unix::fs::symlink(&away, d.join("shots/f-002.png")).unwrap();
     let s = state(Some(d));
     for (body, field) in [
         (serde_json::json!({"content": "../secret.mp4"}), "/content"),
@@ -332,14 +354,13 @@ async fn bad_jobs_are_refused_by_field() {
         assert_eq!(status, StatusCode::BAD_REQUEST, "{body}: {b}");
         assert_eq!(b["field"], field, "{body}: {b}");
     }
-    let (status, b) = post(&s, serde_json::json!({"content": "link.mp4"})).await;
-    assert!(
-        b["error"]
-            .as_str()
-            .unwrap()
-            .contains("out of the media folder"),
-        "{status} {b}"
-    );
+    for content in ["link.mp4", "shots/f-%03d.png"] {
+        let (status, b) = post(&s, serde_json::json!({ "content": content })).await;
+        let error = b["error"].as_str().unwrap();
+        assert!(error.contains("out of the media folder"), "{status} {b}");
+        assert!(!error.contains(outside.path().to_str().unwrap()), "{b}");
+        assert_eq!(b["field"], "/content");
+    }
     // A canvas a movie cannot be laid out on.
     let canvas =
         serde_json::json!({"projection": "flat", "params": {"hfov": 90}, "size": [640, 480]});
@@ -361,6 +382,20 @@ async fn bad_jobs_are_refused_by_field() {
     .await;
     assert_eq!(status, StatusCode::CONFLICT, "{b}");
     assert_eq!(b["field"], "/projection", "{b}");
+    // Canvases that differ only in size differ in layout where a field of view follows the
+    // aspect: one decode cannot serve both.
+    let canvas = serde_json::json!({"projection": "equirect", "params": {"hfov": 360}, "size": [4096, 1024]});
+    let (status, _, _) = call(
+        &s,
+        write(
+            "PUT",
+            "/v1/channels/left/content",
+            Some(2),
+            canvas.to_string(),
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
     let (status, b) = post(&s, serde_json::json!({"content": "ok.mkv"})).await;
     assert_eq!(status, StatusCode::CONFLICT, "{b}");
     assert_eq!(b["field"], "/channels", "{b}");
@@ -391,6 +426,21 @@ async fn the_list_survives_a_restart_and_an_interrupted_job_is_failed() {
     });
     std::fs::write(job.join("job.json"), record.to_string()).unwrap();
     std::fs::write(job.join(".left.mp4.partial-123.mp4"), b"half").unwrap();
+    // A record that points a download elsewhere, and a job folder that is a link, are not read.
+    let planted = d.join("renders/9");
+    std::fs::create_dir_all(&planted).unwrap();
+    let mut hostile = record.clone();
+    hostile["id"] = 9.into();
+    hostile["state"] = "done".into();
+    hostile["files"] =
+        serde_json::json!([{"name": "../../../etc/passwd", "channel": "left", "bytes": 1}]);
+    std::fs::write(planted.join("job.json"), hostile.to_string()).unwrap();
+    let elsewhere = tempfile::tempdir().unwrap();
+    let mut linked = record.clone();
+    linked["id"] = 10.into();
+    std::fs::write(elsewhere.path().join("job.json"), linked.to_string()).unwrap();
+    std::fs::write(elsewhere.path().join("keep.mp4"), b"x").unwrap();
+    std::os::unix::fs::symlink(elsewhere.path(), d.join("renders/10")).unwrap();
     let s = state(Some(d));
     let (status, _, b) = call(&s, get("/v1/jobs/7")).await;
     assert_eq!(status, StatusCode::OK);
@@ -405,6 +455,11 @@ async fn the_list_survives_a_restart_and_an_interrupted_job_is_failed() {
         .map(|e| e.unwrap().file_name())
         .collect();
     assert_eq!(left, ["job.json"]);
+    for id in [9, 10] {
+        let (status, _, _) = call(&s, get(&format!("/v1/jobs/{id}"))).await;
+        assert_eq!(status, StatusCode::NOT_FOUND, "job {id}");
+    }
+    assert!(elsewhere.path().join("keep.mp4").exists());
     let kept: Value =
         serde_json::from_slice(&std::fs::read(job.join("job.json")).unwrap()).unwrap();
     assert_eq!(kept["state"], "failed");
@@ -418,6 +473,6 @@ async fn the_list_survives_a_restart_and_an_interrupted_job_is_failed() {
     )
     .await;
     assert_eq!(status, StatusCode::ACCEPTED, "{r}");
-    assert_eq!(r["id"], 8);
-    assert_eq!(ended(&s, 8).await["state"], "done");
+    assert_eq!(r["id"], 11);
+    assert_eq!(ended(&s, 11).await["state"], "done");
 }

@@ -7,7 +7,7 @@ use crate::render::Filter;
 use crate::server::ApiError;
 use crate::server::http::jobs::{job, run_job};
 use crate::server::http::state::{AppState, Query, parse_body};
-use crate::server::renders::{self, Blend, Channel, Record, State, Work};
+use crate::server::renders::{self, Blend, CONTAINERS, Channel, Record, State, Work};
 use axum::Json;
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State as With};
@@ -41,8 +41,6 @@ struct JobRequest {
     /// An image sequence's rate (`25`, `30000/1001`; default 30).
     frame_rate: Option<String>,
 }
-
-const CONTAINERS: [&str; 4] = ["mp4", "mov", "mkv", "nut"];
 
 fn invalid(field: &str, reason: impl Into<String>) -> ApiError {
     ApiError::Invalid {
@@ -107,7 +105,33 @@ fn inside(folder: &std::path::Path, content: &str) -> Result<PathBuf, ApiError> 
             ),
         ));
     }
-    Ok(if sequence { path } else { real })
+    Ok(if sequence {
+        real.join(path.file_name().expect("a pattern names a file"))
+    } else {
+        real
+    })
+}
+
+/// Every frame of a sequence inside the media folder: a frame that is a symbolic link to a
+/// file elsewhere is refused like a path that leads out.
+fn frames_inside(folder: &std::path::Path, input: &Input) -> Result<(), ApiError> {
+    if let Input::Sequence(seq, _) = input {
+        for f in &seq.files {
+            let real = f
+                .canonicalize()
+                .map_err(|e| invalid("/content", format!("{}: {e}", f.display())))?;
+            if !real.starts_with(folder) {
+                return Err(invalid(
+                    "/content",
+                    format!(
+                        "frame {} leads out of the media folder",
+                        f.file_name().unwrap_or_default().to_string_lossy()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn filter(name: Option<&str>) -> Result<Filter, ApiError> {
@@ -122,20 +146,34 @@ fn filter(name: Option<&str>) -> Result<Filter, ApiError> {
     }
 }
 
-/// A content canvas without what leaves the layout of the content alone: its nominal size
-/// and projection centre (both already in each channel's warp).
-fn layout_of(c: &crate::rig::Canvas) -> crate::rig::Canvas {
-    crate::rig::Canvas {
-        size: [1, 1],
-        project_from: None,
-        ..c.clone()
+/// The refusal when the jobs are at a limit: too many waiting (or the daemon stopping), or
+/// the list full.
+fn full(waiting: bool) -> ApiError {
+    if waiting {
+        ApiError::refused(
+            StatusCode::SERVICE_UNAVAILABLE,
+            None,
+            format!(
+                "{} render jobs already wait their turn (or the daemon is stopping); retry when \
+                 one has finished",
+                crate::limits::RENDER_JOBS_WAITING
+            ),
+        )
+    } else {
+        ApiError::refused(
+            StatusCode::CONFLICT,
+            None,
+            format!(
+                "the daemon lists {} render jobs at most; DELETE finished ones first",
+                crate::limits::RENDER_JOBS
+            ),
+        )
     }
 }
 
 pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Response, ApiError> {
     let b: JobRequest = parse_body(&body)?;
     let folder = folder(&s)?;
-    let path = inside(&folder, &b.content)?;
     let container = b.container.clone().unwrap_or_else(|| "mp4".into());
     if !CONTAINERS.contains(&container.as_str()) {
         return Err(invalid(
@@ -173,7 +211,7 @@ pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Respons
         }
         other => other.into(),
     })?;
-    let (rig, rig_revision) = s.store.snapshot();
+    let (rig, _) = s.store.snapshot();
     let ids: Vec<String> = match &b.channels {
         Some(ids) => ids.clone(),
         None => rig.doc.channels.iter().map(|c| c.id.clone()).collect(),
@@ -198,60 +236,64 @@ pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Respons
             ));
         }
     }
+    // Refused now if it would be refused after the work below.
+    s.renders.room().map_err(full)?;
     let mut channels = Vec::new();
-    let mut canvas = None;
+    let mut canvases = Vec::new();
+    let mut rig_revision = None;
     for id in &ids {
         let j = job(&s, id).await?;
-        match &canvas {
-            None => canvas = Some(j.canvas.clone()),
-            Some(c) if layout_of(c) != layout_of(&j.canvas) => {
-                return Err(ApiError::refused(
-                    StatusCode::CONFLICT,
-                    Some("/channels"),
-                    format!(
-                        "channels `{}` and `{id}` lay the content out on different canvases; \
-                         render them in separate jobs",
-                        ids[0]
-                    ),
-                ));
-            }
-            Some(_) => {}
-        }
+        rig_revision.get_or_insert(j.rig_revision);
+        canvases.push((id.clone(), j.canvas.clone()));
         channels.push(Channel {
             id: id.clone(),
             computed: j.computed,
         });
     }
-    let canvas = canvas.expect("at least one channel");
-    // The content probed and laid out on the canvas once now, so that what cannot work is
-    // refused here rather than failing later.
-    let probe_canvas = canvas.clone();
-    let first = ids[0].clone();
-    // Reasons name the content as the client did, not where the media folder is.
-    let within = format!("{}/", folder.display());
+    let canvas = canvases[0].1.clone();
+    // The path resolved, the content probed and laid out on every channel's canvas now, on
+    // the blocking pool, so that what cannot work is refused here rather than failing later.
+    let content = b.content.clone();
     let input = run_job(&s, move |_| {
+        let path = inside(&folder, &content)?;
         let input = Input::open(&path, rate).map_err(|e| match e {
             crate::Error::Invalid { name, reason } if name == "frame-rate" => {
                 invalid("/frame_rate", reason)
             }
             crate::Error::Invalid { reason, .. } => {
-                invalid("/content", reason.replace(&within, ""))
+                invalid("/content", renders::private(&reason, &folder))
             }
-            other => invalid("/content", other.to_string().replace(&within, "")),
+            other => invalid("/content", renders::private(&other.to_string(), &folder)),
         })?;
-        let (w, h) = input.size();
-        let frame = crate::raster::Raster::<[u8; 4]>::new(w, h);
-        probe_canvas.content(&frame).map_err(|e| match e {
-            crate::Error::Invalid { name, reason } => ApiError::refused(
-                StatusCode::CONFLICT,
-                Some(&name),
-                format!(
-                    "channel `{first}`'s content canvas (GET /v1/channels/{first}/content) \
-                     cannot hold this content: {reason}"
+        frames_inside(&folder, &input)?;
+        let mut first = None;
+        for (id, c) in &canvases {
+            let layout = c.layout(input.size()).map_err(|e| match e {
+                crate::Error::Invalid { name, reason } => ApiError::refused(
+                    StatusCode::CONFLICT,
+                    Some(&name),
+                    format!(
+                        "channel `{id}`'s content canvas (GET /v1/channels/{id}/content) \
+                         cannot hold this content: {reason}"
+                    ),
                 ),
-            ),
-            other => other.into(),
-        })?;
+                other => other.into(),
+            })?;
+            match &first {
+                None => first = Some((id, layout)),
+                Some((one, l)) if *l != layout => {
+                    return Err(ApiError::refused(
+                        StatusCode::CONFLICT,
+                        Some("/channels"),
+                        format!(
+                            "channels `{one}` and `{id}` lay the content out on different \
+                             canvases; render them in separate jobs"
+                        ),
+                    ));
+                }
+                Some(_) => {}
+            }
+        }
         Ok(input)
     })
     .await?;
@@ -262,7 +304,7 @@ pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Respons
         channels: ids,
         container,
         blend: b.blend,
-        rig_revision,
+        rig_revision: rig_revision.unwrap_or_default(),
         created_ms: std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_millis() as i64),
@@ -281,27 +323,9 @@ pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Respons
         encoding,
         filter,
     };
-    let queued = renders::submit(&s, record, work, b.blend).map_err(|too_many| {
-        if too_many {
-            ApiError::refused(
-                StatusCode::SERVICE_UNAVAILABLE,
-                None,
-                format!(
-                    "{} render jobs already wait their turn; retry when one has finished",
-                    crate::limits::RENDER_JOBS_WAITING
-                ),
-            )
-        } else {
-            ApiError::refused(
-                StatusCode::CONFLICT,
-                None,
-                format!(
-                    "the daemon lists {} render jobs at most; DELETE finished ones first",
-                    crate::limits::RENDER_JOBS
-                ),
-            )
-        }
-    })?;
+    let queued = renders::submit(&s, record, work, b.blend)
+        .await
+        .map_err(full)?;
     let mut resp = (StatusCode::ACCEPTED, Json(&queued)).into_response();
     if let Ok(v) = format!("/v1/jobs/{}", queued.id).parse() {
         resp.headers_mut().insert(header::LOCATION, v);
@@ -389,14 +413,15 @@ pub async fn delete(
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
     let id = job_id(&id)?;
-    match s.renders.remove(id) {
+    match s.renders.ended(id) {
         None => Err(no_job(id)),
         Some(Err(_)) => Err(ApiError::refused(
             StatusCode::CONFLICT,
             None,
             format!("job {id} has not ended: POST /v1/jobs/{id}/cancel first"),
         )),
-        Some(Ok(_)) => {
+        Some(Ok(())) => {
+            // The folder first: a job whose files could not be removed stays listed.
             if let Some(dir) = s.renders.dir(id) {
                 tokio::task::spawn_blocking(move || std::fs::remove_dir_all(&dir))
                     .await
@@ -406,6 +431,7 @@ pub async fn delete(
                         _ => Err(ApiError::Internal(e.to_string())),
                     })?;
             }
+            s.renders.forget(id);
             Ok(StatusCode::NO_CONTENT)
         }
     }
@@ -426,9 +452,17 @@ pub async fn file(
         }));
     };
     let path = s.renders.dir(id).ok_or_else(|| no_job(id))?.join(&f.name);
-    let file = tokio::fs::File::open(&path)
+    let gone = |e: std::io::Error| {
+        ApiError::NotFound(format!("job {id}'s `{name}` is no longer there: {e}"))
+    };
+    // The job's own file, not a link someone put in its place.
+    let file = tokio::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&path)
         .await
-        .map_err(|e| ApiError::Internal(format!("{}: {e}", path.display())))?;
+        .map_err(gone)?;
+    let bytes = file.metadata().await.map_err(gone)?.len();
     let kind = match name.rsplit('.').next() {
         Some("mp4") => "video/mp4",
         Some("mov") => "video/quicktime",
@@ -451,7 +485,7 @@ pub async fn file(
     Ok((
         [
             (header::CONTENT_TYPE, kind.to_string()),
-            (header::CONTENT_LENGTH, f.bytes.to_string()),
+            (header::CONTENT_LENGTH, bytes.to_string()),
             (
                 header::CONTENT_DISPOSITION,
                 format!("attachment; filename=\"{}\"", f.name),
