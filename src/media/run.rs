@@ -667,31 +667,24 @@ mod tests {
         )
         .unwrap();
         let (w, h) = (45, 37);
-        let plan = Plan::new(
-            crate::render::Warp::View(&view),
-            &content,
-            content.atlas(),
-            w as u32,
-            h as u32,
-            1,
-            crate::render::Filter::Bilinear,
-        )
-        .unwrap();
+        let plan = || {
+            Plan::new(
+                crate::render::Warp::View(&view),
+                &content,
+                content.atlas(),
+                w as u32,
+                h as u32,
+                1,
+                crate::render::Filter::Bilinear,
+            )
+            .unwrap()
+        };
         let gains: Vec<f32> = (0..w * h).map(|i| (i % 17) as f32 / 16.0).collect();
         let saturation: Vec<f32> = (0..w * h).map(|i| (i % 5) as f32 / 4.0).collect();
         let encoder = Matrix::from_tags(None, None).encoder();
         for native in [true, false] {
             let t = Target {
-                plan: Plan::new(
-                    crate::render::Warp::View(&view),
-                    &content,
-                    content.atlas(),
-                    w as u32,
-                    h as u32,
-                    1,
-                    crate::render::Filter::Bilinear,
-                )
-                .unwrap(),
+                plan: plan(),
                 size: (w as u32, h as u32),
                 gains: Some(gains.clone()),
                 saturation: (!native).then(|| saturation.clone()),
@@ -712,7 +705,7 @@ mod tests {
             else {
                 panic!("4:2:0 frames are bytes")
             };
-            let mut img = plan.render(content.atlas()).unwrap();
+            let mut img = plan().render(content.atlas()).unwrap();
             let whole = if native {
                 whole_native(&img, Some(&gains), 16)
             } else {

@@ -164,6 +164,22 @@ pub fn gain<T: Pixel>(p: &mut T, m: f32) {
     }
 }
 
+/// Blend gains (signal space, from [`signal_gains`]) as an 8-bit grey image, for a media
+/// server that applies the blend itself.
+pub fn gains_image(width: usize, height: usize, gains: &[f32]) -> Raster<[u8; 4]> {
+    Raster {
+        width,
+        height,
+        data: gains
+            .iter()
+            .map(|&g| {
+                let v = (g.clamp(0.0, 1.0) * 255.0).round() as u8;
+                [v, v, v, 255]
+            })
+            .collect(),
+    }
+}
+
 /// Writes blend weights as a grey PNG (16 or 8 bits) in signal space (m = w^(1/γ)).
 pub fn write_blend_png(
     path: &Path,

@@ -19,7 +19,9 @@ pub use canvas::{Canvas, Layout};
 pub use coverage::Coverage;
 pub use plan::{ChannelPlan, Overlap, Plan, PointPlan, WallPlan};
 
-pub use blend::{BlendOptions, apply_gains, blend_png_bytes, gain, signal_gains, write_blend_png};
+pub use blend::{
+    BlendOptions, apply_gains, blend_png_bytes, gain, gains_image, signal_gains, write_blend_png,
+};
 pub use tiles::{SAMPLED_COLUMNS, default_rows};
 pub use warp::ChannelWarp;
 

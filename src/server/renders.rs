@@ -570,17 +570,8 @@ fn run(
         let gains = match blend {
             Blend::Baked => Some(gains),
             Blend::Separate => {
-                let mask = crate::raster::Raster {
-                    width: computed.map.width(),
-                    height: computed.map.height(),
-                    data: gains
-                        .iter()
-                        .map(|&g| {
-                            let v = (g.clamp(0.0, 1.0) * 255.0).round() as u8;
-                            [v, v, v, 255]
-                        })
-                        .collect(),
-                };
+                let mask =
+                    crate::rig::gains_image(computed.map.width(), computed.map.height(), &gains);
                 let file = format!("{}-blend.png", c.id);
                 crate::image_io::write_png(&dir.join(&file), &mask)?;
                 blends.push((file, c.id.clone()));

@@ -120,20 +120,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
             mask = Some(k);
             Some(m)
         }
-        (Some(path), None) => {
-            let (w, h) = a
-                .size
-                .context("--size: needed for the eye's view of a rig (--rig without --channel)")?;
-            if a.projection.projection.is_none() {
-                bail!("--projection: needed for the eye's view of a rig (or give --channel)");
-            }
-            let rig = read_rig(path)?;
-            let centre = rig
-                .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
-                .map_err(flag_error)?;
-            let view = a.projection.view(w, h)?;
-            Some(rig.eye_view(&view, w, h, centre).map_err(flag_error)?)
-        }
+        (Some(path), None) => Some(eye_view(&a, path)?),
         (None, _) if a.project_from.is_some() => {
             bail!("--project-from: needs a surface to project onto: --rig (its wall) or --scene")
         }
@@ -225,25 +212,11 @@ fn render_movie(a: &RenderArgs) -> Result<()> {
             }
         }
         _ if per_channel => bail!("--out: {{channel}} names one output per rig channel (--rig)"),
-        Some(rig) => {
-            let (w, h) = a
-                .size
-                .context("--size: needed for the eye's view of a rig (--rig without --channel)")?;
-            if a.projection.projection.is_none() {
-                bail!("--projection: needed for the eye's view of a rig (or give --channel)");
-            }
-            let rig = read_rig(rig)?;
-            let centre = rig
-                .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
-                .map_err(flag_error)?;
-            let view = a.projection.view(w, h)?;
-            let map = rig.eye_view(&view, w, h, centre).map_err(flag_error)?;
-            outputs.push(movie::Output {
-                path: template,
-                source: movie::Source::Map(map),
-                gains: None,
-            });
-        }
+        Some(rig) => outputs.push(movie::Output {
+            path: template,
+            source: movie::Source::Map(eye_view(a, rig)?),
+            gains: None,
+        }),
         None if a.project_from.is_some() => {
             bail!("--project-from: needs a surface to project onto: --rig (its wall)")
         }
@@ -271,6 +244,23 @@ fn render_movie(a: &RenderArgs) -> Result<()> {
         supersample: a.supersample,
         filter: filter(a.filter),
     })
+}
+
+/// The rig's wall seen from its eye (or `--project-from`) through `--projection` at `--size`:
+/// `render --rig` without `--channel`.
+fn eye_view(a: &RenderArgs, path: &Path) -> Result<NormalMap> {
+    let (w, h) = a
+        .size
+        .context("--size: needed for the eye's view of a rig (--rig without --channel)")?;
+    if a.projection.projection.is_none() {
+        bail!("--projection: needed for the eye's view of a rig (or give --channel)");
+    }
+    let rig = read_rig(path)?;
+    let centre = rig
+        .check_centre(a.project_from.unwrap_or(rig.eye), "project-from")
+        .map_err(flag_error)?;
+    let view = a.projection.view(w, h)?;
+    rig.eye_view(&view, w, h, centre).map_err(flag_error)
 }
 
 /// A channel's warp map (for a panorama projected from `project_from`, if given) and its blend

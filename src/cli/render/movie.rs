@@ -275,17 +275,7 @@ fn write_blend(path: &Path, source: &Source, gains: &[f32]) -> Result<()> {
         .unwrap_or("out")
         .trim_end_matches('-')
         .to_string();
-    let mask = Raster {
-        width: m.width(),
-        height: m.height(),
-        data: gains
-            .iter()
-            .map(|&g| {
-                let v = (g.clamp(0.0, 1.0) * 255.0).round() as u8;
-                [v, v, v, 255]
-            })
-            .collect(),
-    };
+    let mask = omniwarp::rig::gains_image(m.width(), m.height(), gains);
     let out = path.with_file_name(format!("{stem}-blend.png"));
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("--out: {}", dir.display()))?;
