@@ -232,6 +232,12 @@ pub fn run(a: ServeArgs) -> Result<()> {
             // Jobs write there: a folder they cannot write to is found now, not at the end of
             // the first job.
             let renders = m.join("renders");
+            if std::fs::symlink_metadata(&renders).is_ok_and(|r| !r.is_dir()) {
+                bail!(
+                    "--media: {} is not a folder of its own (a link?); jobs write only there",
+                    renders.display()
+                );
+            }
             std::fs::create_dir_all(&renders)
                 .and_then(|()| tempfile::tempfile_in(&renders).map(drop))
                 .with_context(|| format!("--media: cannot write to {}", renders.display()))?;

@@ -79,6 +79,12 @@ impl Sequence {
     /// frame is named), at most [`crate::limits::SEQUENCE_FRAMES`], all of the first one's size
     /// and depth (checked as they are read).
     pub fn find(pattern: &Path) -> Result<Sequence> {
+        Self::find_within(pattern, None)
+    }
+
+    /// [`Sequence::find`], every frame checked to be a file inside `root` (symbolic links
+    /// followed) before any is read, when given: the daemon's media folder.
+    pub fn find_within(pattern: &Path, root: Option<&Path>) -> Result<Sequence> {
         let name = pattern.file_name().and_then(|n| n.to_str()).unwrap_or("");
         let (prefix, width, suffix) = split_pattern(name).ok_or_else(|| {
             Error::invalid(
@@ -134,6 +140,22 @@ impl Sequence {
             ));
         }
         let files: Vec<PathBuf> = (first..=last).map(file).collect();
+        if let Some(root) = root {
+            for f in &files {
+                let inside = f
+                    .canonicalize()
+                    .is_ok_and(|real| real.starts_with(root) && real.is_file());
+                if !inside {
+                    return Err(Error::invalid(
+                        "content",
+                        format!(
+                            "frame {} leads out of the media folder, or is not a file",
+                            f.file_name().unwrap_or_default().to_string_lossy()
+                        ),
+                    ));
+                }
+            }
+        }
         let (size, deep) = match image_io::read_image(&files[0])? {
             Loaded::U8(r) => ((r.width, r.height), false),
             Loaded::F32(r) => ((r.width, r.height), true),
@@ -163,9 +185,15 @@ impl Input {
     /// The content at `path`: an image sequence when its name has a frame number pattern
     /// (played at `rate`, default 30 frames a second), else a movie, probed.
     pub fn open(path: &Path, rate: Option<Rate>) -> Result<Input> {
+        Self::open_within(path, rate, None)
+    }
+
+    /// [`Input::open`], a sequence's every frame checked to lie inside `root` before any is
+    /// read (see [`Sequence::find_within`]).
+    pub fn open_within(path: &Path, rate: Option<Rate>, root: Option<&Path>) -> Result<Input> {
         if Sequence::is_pattern(path) {
             let rate = rate.unwrap_or(Rate { num: 30, den: 1 });
-            return Ok(Input::Sequence(Sequence::find(path)?, rate));
+            return Ok(Input::Sequence(Sequence::find_within(path, root)?, rate));
         }
         if rate.is_some() {
             return Err(Error::invalid(

@@ -146,7 +146,8 @@ impl Canvas {
                     return Err(crate::Error::invalid(
                         "/params",
                         format!(
-                            "the fisheye's fields of view give its {cw}×{ch} canvas pixels of two                              sizes; a movie is laid out on a fisheye canvas with square pixels"
+                            "the fisheye's fields of view give its {cw}×{ch} canvas pixels of two \
+                            sizes; a movie is laid out on a fisheye canvas with square pixels"
                         ),
                     ));
                 }
@@ -154,7 +155,8 @@ impl Canvas {
                     return Err(crate::Error::invalid(
                         "/size",
                         format!(
-                            "a fisheye's frame must have the canvas's aspect ratio: the frame is                              {w}×{h}, the canvas {cw}×{ch}"
+                            "a fisheye's frame must have the canvas's aspect ratio: the frame is \
+                            {w}×{h}, the canvas {cw}×{ch}"
                         ),
                     ));
                 }
@@ -171,7 +173,8 @@ impl Canvas {
                 return Err(crate::Error::invalid(
                     "/projection",
                     format!(
-                        "a movie is laid out on equirect, cylindrical, fisheye (equidistant) and                          domemaster canvases, not `{}`",
+                        "a movie is laid out on equirect, cylindrical, fisheye (equidistant) and \
+                        domemaster canvases, not `{}`",
                         projection.name()
                     ),
                 ));

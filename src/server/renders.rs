@@ -140,8 +140,9 @@ struct Entry {
     record: Mutex<Record>,
     stop: AtomicBool,
     /// Held from reading the record to having kept and announced it, so that two changes
-    /// are kept in the order they were made.
-    saving: Mutex<()>,
+    /// are kept in the order they were made; true once the job's folder is deleted, after
+    /// which nothing is kept (a late change would bring the record back).
+    saving: Mutex<bool>,
 }
 
 impl Entry {
@@ -149,7 +150,7 @@ impl Entry {
         Arc::new(Entry {
             record: Mutex::new(record),
             stop: AtomicBool::new(false),
-            saving: Mutex::new(()),
+            saving: Mutex::new(false),
         })
     }
 
@@ -217,14 +218,17 @@ impl Renders {
         let mut jobs = BTreeMap::new();
         let mut taken = 0;
         let root = folder.map(|f| f.join("renders"));
+        let mut folder = folder;
         if let Some(root) = root.as_ref().filter(|r| r.exists() && !real_dir(r)) {
-            tracing::warn!(path = %root.display(), "renders/ is not a folder of its own; no job is read from it");
+            tracing::warn!(path = %root.display(), "renders/ is not a folder of its own; render jobs are off");
+            folder = None;
         } else if let Some(dirs) = root.and_then(|r| std::fs::read_dir(r).ok()) {
             let dirs: Vec<PathBuf> = dirs.flatten().map(|d| d.path()).collect();
             // New jobs take numbers after every folder there, read or not.
             taken = dirs
                 .iter()
                 .filter_map(|d| d.file_name()?.to_str()?.parse::<u64>().ok())
+                .filter(|&n| n < 1 << 40)
                 .max()
                 .unwrap_or(0);
             for dir in dirs.into_iter().filter(|d| real_dir(d)) {
@@ -340,9 +344,22 @@ impl Renders {
         })
     }
 
-    /// Forgets job `id` (its folder already removed).
-    pub fn forget(&self, id: u64) {
+    /// Deletes ended job `id`: its folder, then the job itself. A change of its record still
+    /// on its way is dropped rather than bringing the folder back. Blocking.
+    pub fn delete(&self, id: u64) -> std::io::Result<()> {
+        let Some(entry) = self.jobs().get(&id).cloned() else {
+            return Ok(());
+        };
+        let mut gone = entry.saving.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(dir) = self.dir(id) {
+            match std::fs::remove_dir_all(&dir) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+                _ => {}
+            }
+        }
+        *gone = true;
         self.jobs().remove(&id);
+        Ok(())
     }
 
     /// Stops every job and takes no more (the daemon is shutting down), then waits up to
@@ -395,18 +412,59 @@ pub async fn submit(
 ) -> Result<Record, bool> {
     let (entry, dir) = s.renders.admit(record)?;
     let queued = entry.record().clone();
-    let (st, e, d) = (s.clone(), entry.clone(), dir.clone());
-    let _ = tokio::task::spawn_blocking(move || update(&st, &e, &d, |_| {})).await;
-    tokio::spawn(turn(s.clone(), entry, dir, work, blend));
+    let (kept, written) = tokio::sync::oneshot::channel();
+    // The job's own task from here on: a client that goes away while its record is written
+    // leaves a job that still runs, not one queued for ever.
+    let state = s.clone();
+    tokio::spawn(async move {
+        let (st, e, d) = (state.clone(), entry.clone(), dir.clone());
+        let made = tokio::task::spawn_blocking(move || {
+            // A folder of its own: one already there (planted, or left by hand) is not used.
+            if let Some(renders) = d.parent() {
+                std::fs::create_dir_all(renders).map_err(|err| crate::Error::file(renders, err))?;
+            }
+            std::fs::create_dir(&d).map_err(|err| crate::Error::file(&d, err))?;
+            update(&st, &e, &d, |_| {});
+            Ok::<_, crate::Error>(())
+        })
+        .await
+        .unwrap_or_else(|e| Err(crate::Error::invalid("job", e.to_string())));
+        if let Err(e) = made {
+            tracing::warn!(error = %e, "a render job's folder cannot be made");
+            let mut r = entry.record();
+            r.state = State::Failed;
+            r.finished_ms = Some(now_ms());
+            r.error = Some(Failure {
+                field: None,
+                reason: "its folder under renders/ could not be made".into(),
+            });
+            return;
+        }
+        let _ = kept.send(());
+        turn(state, entry, dir, work, blend).await;
+    });
+    let _ = written.await;
     Ok(queued)
 }
 
 /// A job from the queue to its end: its turn, a worker permit for the whole run (previews
 /// keep the others), the run on the blocking pool, the outcome kept.
 async fn turn(s: Arc<super::AppState>, entry: Arc<Entry>, dir: PathBuf, work: Work, blend: Blend) {
-    let turn = s.renders.turn.clone().acquire_owned().await;
-    let permit = s.workers.clone().acquire_owned().await;
-    let (Ok(_turn), Ok(permit)) = (turn, permit) else {
+    // A job cancelled while it waits lets go at once, not when its turn would have come.
+    let cancelled = async {
+        while !entry.stop.load(Ordering::Relaxed) {
+            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        }
+    };
+    let ready = async {
+        let turn = s.renders.turn.clone().acquire_owned().await;
+        let permit = s.workers.clone().acquire_owned().await;
+        (turn, permit)
+    };
+    let (Ok(_turn), Ok(permit)) = (tokio::select! {
+        got = ready => got,
+        () = cancelled => return,
+    }) else {
         return;
     };
     let (st, e, d) = (s.clone(), entry.clone(), dir.clone());
@@ -528,16 +586,16 @@ pub async fn cancel(
 
 /// Changes a job's record, keeps it and announces it, in the order the changes are made.
 fn update(s: &super::AppState, entry: &Entry, dir: &Path, change: impl FnOnce(&mut Record)) {
-    let _order = entry.saving.lock().unwrap_or_else(|e| e.into_inner());
+    let gone = entry.saving.lock().unwrap_or_else(|e| e.into_inner());
     let record = {
         let mut r = entry.record();
         change(&mut r);
         r.clone()
     };
-    let kept = std::fs::create_dir_all(dir)
-        .map_err(|e| crate::Error::file(dir, e))
-        .and_then(|()| save(dir, &record));
-    if let Err(e) = kept {
+    if *gone {
+        return;
+    }
+    if let Err(e) = save(dir, &record) {
         tracing::warn!(job = record.id, error = %e, "cannot keep a render job's record");
     }
     announce(s, &record);

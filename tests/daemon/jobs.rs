@@ -476,3 +476,23 @@ async fn the_list_survives_a_restart_and_an_interrupted_job_is_failed() {
     assert_eq!(r["id"], 11);
     assert_eq!(ended(&s, 11).await["state"], "done");
 }
+
+/// A `renders/` that is a link to a folder elsewhere turns jobs off rather than writing (and
+/// cleaning up) there.
+#[tokio::test]
+async fn a_linked_renders_folder_turns_jobs_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let elsewhere = tempfile::tempdir().unwrap();
+    std::fs::create_dir(elsewhere.path().join("1")).unwrap();
+    std::fs::write(elsewhere.path().join("1/keep.mp4"), b"x").unwrap();
+    std::os::unix::fs::symlink(elsewhere.path(), d.join("renders")).unwrap();
+    ffmpeg(
+        d,
+        "-f lavfi -i testsrc2=size=64x32:rate=15 -frames:v 2 ok.mkv",
+    );
+    let s = state(Some(d));
+    let (status, b) = post(&s, serde_json::json!({"content": "ok.mkv"})).await;
+    assert_eq!(status, StatusCode::CONFLICT, "{b}");
+    assert!(elsewhere.path().join("1/keep.mp4").exists());
+}

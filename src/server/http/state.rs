@@ -223,7 +223,8 @@ impl Captures {
             return Err(ApiError::Invalid {
                 field: "body".into(),
                 reason: format!(
-                    "a {len}-frame sequence of {}×{} captures needs {} MiB, above the {} MiB                      the daemon holds; capture at a lower resolution or bit depth",
+                    "a {len}-frame sequence of {}×{} captures needs {} MiB, above the {} MiB \
+                    the daemon holds; capture at a lower resolution or bit depth",
                     frame.width,
                     frame.height,
                     whole >> 20,
@@ -236,7 +237,8 @@ impl Captures {
             return Err(ApiError::Invalid {
                 field: "view".into(),
                 reason: format!(
-                    "the daemon holds captures of at most {slots} sequences (channel, view,                      period and code) at once; decode or DELETE some first"
+                    "the daemon holds captures of at most {slots} sequences (channel, view, \
+                    period and code) at once; decode or DELETE some first"
                 ),
             });
         }

@@ -112,28 +112,6 @@ fn inside(folder: &std::path::Path, content: &str) -> Result<PathBuf, ApiError> 
     })
 }
 
-/// Every frame of a sequence inside the media folder: a frame that is a symbolic link to a
-/// file elsewhere is refused like a path that leads out.
-fn frames_inside(folder: &std::path::Path, input: &Input) -> Result<(), ApiError> {
-    if let Input::Sequence(seq, _) = input {
-        for f in &seq.files {
-            let real = f
-                .canonicalize()
-                .map_err(|e| invalid("/content", format!("{}: {e}", f.display())))?;
-            if !real.starts_with(folder) {
-                return Err(invalid(
-                    "/content",
-                    format!(
-                        "frame {} leads out of the media folder",
-                        f.file_name().unwrap_or_default().to_string_lossy()
-                    ),
-                ));
-            }
-        }
-    }
-    Ok(())
-}
-
 fn filter(name: Option<&str>) -> Result<Filter, ApiError> {
     match name.unwrap_or("bilinear") {
         "nearest" => Ok(Filter::Nearest),
@@ -256,7 +234,7 @@ pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Respons
     let content = b.content.clone();
     let input = run_job(&s, move |_| {
         let path = inside(&folder, &content)?;
-        let input = Input::open(&path, rate).map_err(|e| match e {
+        let input = Input::open_within(&path, rate, Some(&folder)).map_err(|e| match e {
             crate::Error::Invalid { name, reason } if name == "frame-rate" => {
                 invalid("/frame_rate", reason)
             }
@@ -265,7 +243,6 @@ pub async fn create(With(s): With<Arc<AppState>>, body: Bytes) -> Result<Respons
             }
             other => invalid("/content", renders::private(&other.to_string(), &folder)),
         })?;
-        frames_inside(&folder, &input)?;
         let mut first = None;
         for (id, c) in &canvases {
             let layout = c.layout(input.size()).map_err(|e| match e {
@@ -422,16 +399,11 @@ pub async fn delete(
         )),
         Some(Ok(())) => {
             // The folder first: a job whose files could not be removed stays listed.
-            if let Some(dir) = s.renders.dir(id) {
-                tokio::task::spawn_blocking(move || std::fs::remove_dir_all(&dir))
-                    .await
-                    .map_err(|e| ApiError::Internal(e.to_string()))?
-                    .or_else(|e| match e.kind() {
-                        std::io::ErrorKind::NotFound => Ok(()),
-                        _ => Err(ApiError::Internal(e.to_string())),
-                    })?;
-            }
-            s.renders.forget(id);
+            let state = s.clone();
+            tokio::task::spawn_blocking(move || state.renders.delete(id))
+                .await
+                .map_err(|e| ApiError::Internal(e.to_string()))?
+                .map_err(|e| ApiError::Internal(e.to_string()))?;
             Ok(StatusCode::NO_CONTENT)
         }
     }
