@@ -14,14 +14,16 @@
 
 mod input;
 mod output;
+mod pack;
 mod probe;
 mod run;
 pub mod yuv;
 
 pub use input::{Frame, Input, Sequence};
 pub use output::{Encoding, OutputSpec};
+pub use pack::Sample;
 pub use probe::{Info, Rate};
-pub use run::{Progress, Sample, Summary, Target, transcode};
+pub use run::{Progress, Summary, Target, transcode};
 
 use crate::Error;
 use std::path::{Path, PathBuf};

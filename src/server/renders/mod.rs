@@ -7,8 +7,10 @@
 //! atomically at every change of state, so the list survives a restart; a job the daemon
 //! stopped in (killed, or shut down) comes back failed, its partial files removed.
 
-use crate::media::{Encoding, Input, OutputSpec, Progress, Sample, Target};
-use crate::render::{Filter, Plan, Warp};
+mod run;
+
+use crate::media::{Encoding, Input};
+use crate::render::Filter;
 use crate::rig::Canvas;
 use crate::server::storage::cache::Computed;
 use serde::{Deserialize, Serialize};
@@ -405,7 +407,7 @@ fn clear(dir: &Path) {
 /// comes: the queued record, `Err(true)` when too many wait, `Err(false)` when the list is
 /// full.
 pub async fn submit(
-    s: &Arc<super::AppState>,
+    s: &Arc<crate::server::AppState>,
     record: Record,
     work: Work,
     blend: Blend,
@@ -449,7 +451,13 @@ pub async fn submit(
 
 /// A job from the queue to its end: its turn, a worker permit for the whole run (previews
 /// keep the others), the run on the blocking pool, the outcome kept.
-async fn turn(s: Arc<super::AppState>, entry: Arc<Entry>, dir: PathBuf, work: Work, blend: Blend) {
+async fn turn(
+    s: Arc<crate::server::AppState>,
+    entry: Arc<Entry>,
+    dir: PathBuf,
+    work: Work,
+    blend: Blend,
+) {
     // A job cancelled while it waits lets go at once, not when its turn would have come.
     let cancelled = async {
         while !entry.stop.load(Ordering::Relaxed) {
@@ -485,7 +493,7 @@ async fn turn(s: Arc<super::AppState>, entry: Arc<Entry>, dir: PathBuf, work: Wo
             return None;
         }
         update(&st, &e, &d, |_| {});
-        Some(run(&st, &e, &d, work, blend))
+        Some(run::run(&st, &e, &d, work, blend))
     })
     .await;
     let outcome = match ran {
@@ -555,7 +563,7 @@ pub fn private(reason: &str, folder: &Path) -> String {
 /// Asks job `id` to stop and waits (up to `wait`) until it has: a queued job is cancelled at
 /// once, a running one between two frames. Its record, `None` if there is no such job.
 pub async fn cancel(
-    s: &Arc<super::AppState>,
+    s: &Arc<crate::server::AppState>,
     id: u64,
     wait: std::time::Duration,
 ) -> Option<Record> {
@@ -585,7 +593,12 @@ pub async fn cancel(
 }
 
 /// Changes a job's record, keeps it and announces it, in the order the changes are made.
-fn update(s: &super::AppState, entry: &Entry, dir: &Path, change: impl FnOnce(&mut Record)) {
+fn update(
+    s: &crate::server::AppState,
+    entry: &Entry,
+    dir: &Path,
+    change: impl FnOnce(&mut Record),
+) {
     let gone = entry.saving.lock().unwrap_or_else(|e| e.into_inner());
     let record = {
         let mut r = entry.record();
@@ -601,132 +614,9 @@ fn update(s: &super::AppState, entry: &Entry, dir: &Path, change: impl FnOnce(&m
     announce(s, &record);
 }
 
-fn announce(s: &super::AppState, r: &Record) {
+fn announce(s: &crate::server::AppState, r: &Record) {
     s.announce(serde_json::json!({
         "kind": "job", "id": r.id, "state": r.state, "frame": r.frame, "frames": r.frames,
         "fps": r.fps, "eta_seconds": r.eta_seconds,
     }));
-}
-
-/// The job itself, on the blocking pool: the content decoded once, warped and blended for
-/// every channel, each output encoded; the files it made.
-fn run(
-    s: &super::AppState,
-    entry: &Entry,
-    dir: &Path,
-    work: Work,
-    blend: Blend,
-) -> crate::Result<Vec<File>> {
-    std::fs::create_dir_all(dir).map_err(|e| crate::Error::file(dir, e))?;
-    let ext = entry.record().container.clone();
-    let name = |id: &str| format!("{id}.{ext}");
-    let mut blends = Vec::new();
-    let mut outputs = Vec::new();
-    for c in &work.channels {
-        let computed = &c.computed;
-        let gains = crate::rig::signal_gains(&computed.geometry.weights, 2.2)?;
-        let gains = match blend {
-            Blend::Baked => Some(gains),
-            Blend::Separate => {
-                let mask =
-                    crate::rig::gains_image(computed.map.width(), computed.map.height(), &gains);
-                let file = format!("{}-blend.png", c.id);
-                crate::image_io::write_png(&dir.join(&file), &mask)?;
-                blends.push((file, c.id.clone()));
-                None
-            }
-            Blend::None => None,
-        };
-        outputs.push((c, gains));
-    }
-    let mut last = std::time::Instant::now();
-    let progress = |p: Progress| {
-        let fps = p.frame as f64 / p.elapsed.as_secs_f64().max(1e-9);
-        let mut r = entry.record();
-        r.frame = p.frame;
-        r.fps = Some((fps * 100.0).round() / 100.0);
-        r.eta_seconds = p
-            .frames
-            .map(|n| (n.saturating_sub(p.frame) as f64 / fps.max(1e-9)).round());
-        // The feed hears of progress twice a second, not every frame.
-        if last.elapsed().as_millis() >= 500 {
-            last = std::time::Instant::now();
-            let snapshot = r.clone();
-            drop(r);
-            announce(s, &snapshot);
-        }
-    };
-    let specs: Vec<OutputSpec> = work
-        .channels
-        .iter()
-        .map(|c| OutputSpec {
-            path: dir.join(name(&c.id)),
-            encoding: work.encoding.clone(),
-        })
-        .collect();
-    let canvas = work.canvas.clone();
-    let filter = work.filter;
-    let stop = &entry.stop;
-    if work.input.deep() {
-        go::<[f32; 4]>(&work.input, &canvas, outputs, specs, filter, progress, stop)?;
-    } else {
-        go::<[u8; 4]>(&work.input, &canvas, outputs, specs, filter, progress, stop)?;
-    }
-    let mut files = Vec::new();
-    for c in &work.channels {
-        let file = name(&c.id);
-        files.push((file, c.id.clone()));
-    }
-    files.extend(blends);
-    files
-        .into_iter()
-        .map(|(name, channel)| {
-            let path = dir.join(&name);
-            let bytes = std::fs::metadata(&path)
-                .map_err(|e| crate::Error::file(&path, e))?
-                .len();
-            Ok(File {
-                name,
-                channel,
-                bytes,
-            })
-        })
-        .collect()
-}
-
-fn go<T: Sample>(
-    input: &Input,
-    canvas: &Canvas,
-    outputs: Vec<(&Channel, Option<Vec<f32>>)>,
-    specs: Vec<OutputSpec>,
-    filter: Filter,
-    progress: impl FnMut(Progress),
-    stop: &AtomicBool,
-) -> crate::Result<crate::media::Summary> {
-    let setup = |first: &crate::raster::Raster<T>| {
-        let content = canvas.content(first)?;
-        let mut targets = Vec::new();
-        for ((c, gains), out) in outputs.into_iter().zip(specs) {
-            let map = &c.computed.map;
-            let size = (map.width() as u32, map.height() as u32);
-            let plan = Plan::new(
-                Warp::Map(map),
-                &content,
-                content.atlas(),
-                size.0,
-                size.1,
-                1,
-                filter,
-            )?;
-            targets.push(Target {
-                plan,
-                size,
-                gains,
-                saturation: c.computed.f.clone(),
-                out,
-            });
-        }
-        Ok((content, targets))
-    };
-    crate::media::transcode(input, setup, progress, stop)
 }
