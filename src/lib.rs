@@ -18,6 +18,8 @@ pub mod lens;
 pub mod limits;
 pub mod media;
 pub mod normalmap;
+#[cfg(feature = "play")]
+pub mod play;
 pub mod projection;
 pub mod raster;
 pub mod render;

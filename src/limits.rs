@@ -61,6 +61,11 @@ pub const MEDIA_OUTPUTS: usize = CHANNELS;
 pub const RENDER_JOBS: usize = 64;
 /// Render jobs waiting for their turn behind the one running; more are answered 503.
 pub const RENDER_JOBS_WAITING: usize = 4;
+/// Render nodes the daemon follows at once (`PUT /v1/nodes/{id}`); one silent for 30 s gives
+/// its place to a new one.
+pub const NODES: usize = 64;
+/// Outputs of one render node.
+pub const NODE_OUTPUTS: usize = 16;
 /// Bytes of a path under the daemon's media folder.
 pub const MEDIA_PATH: usize = 1024;
 /// The smallest field of view a projection accepts, degrees: below it a content pixel is so

@@ -3,13 +3,15 @@
 
 use super::args::{ContentArgs, ContentFormat, CubeLayoutArg, flag_error};
 use anyhow::{Context, Result, bail};
+use glam::DVec3;
 use omniwarp::content::{Content, Fisheye, Format};
 use omniwarp::cubemap::{CubeMap, Face};
 use omniwarp::image_io::{self, Loaded, Precision};
+use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::Orientation;
 use omniwarp::raster::{Pixel, Raster};
 use omniwarp::render::{self, Filter, Warp};
-use omniwarp::rig::{Channel, Rig};
+use omniwarp::rig::{Channel, Rig, signal_gains};
 use omniwarp::tiles::TileScreen;
 use omniwarp::tiles::adapt::Report;
 use std::path::{Path, PathBuf};
@@ -188,6 +190,41 @@ pub fn read_rig(path: &Path) -> Result<Rig> {
 pub fn channel<'a>(rig: &'a Rig, id: &str) -> Result<&'a Channel> {
     rig.channel(id)
         .map_err(|e| anyhow::anyhow!("--channel: {}", e.reason()))
+}
+
+/// A channel's warp map (for a panorama projected from `project_from`, if given) and its blend
+/// mask in signal space, for `render --rig` and
+/// `play --rig`.
+pub fn render_inputs(
+    path: &Path,
+    id: &str,
+    gamma: f64,
+    project_from: Option<DVec3>,
+) -> Result<(NormalMap, Vec<f32>)> {
+    let rig = read_rig(path)?;
+    let ch = channel(&rig, id)?;
+    let w = rig.warp(ch);
+    let mask = signal_mask(&rig, ch, &w.points, gamma)?;
+    let map = match project_from {
+        Some(c) => {
+            let c = rig.check_centre(c, "project-from").map_err(flag_error)?;
+            let never = std::sync::atomic::AtomicBool::new(false);
+            rig.projected(&w.map, Some(&w.points), c, &never)
+                .expect("never cancelled")
+        }
+        None => w.map,
+    };
+    Ok((map, mask))
+}
+
+/// The blend weights of a channel's pixels in signal space, m = w^(1/γ).
+pub fn signal_mask(
+    rig: &Rig,
+    ch: &Channel,
+    points: &[Option<DVec3>],
+    gamma: f64,
+) -> Result<Vec<f32>> {
+    signal_gains(&rig.blend_weights(ch, points), gamma).map_err(flag_error)
 }
 
 pub fn read_tiles(path: &Path) -> Result<TileScreen> {

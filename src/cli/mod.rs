@@ -25,6 +25,7 @@ mod man;
 mod measure;
 mod normal_map;
 mod pattern;
+mod play;
 mod projections;
 mod render;
 mod rig;
@@ -60,6 +61,9 @@ enum Command {
     /// Render content through a projection, a normal map, a tile screen, a rig channel or a 3D
     /// scene into an image.
     Render(Box<render::RenderArgs>),
+    /// Drive the projectors: each output shows its rig channel's picture, warped and blended,
+    /// following the daemon live (--daemon) or from a rig file (--rig).
+    Play(Box<play::PlayArgs>),
     /// Compute a projection's normal map (per pixel the unit sampling vector V) as float EXR.
     NormalMap(normal_map::NormalMapArgs),
     /// Resample content into a cube map in any layout (six files, strip, ffmpeg c3x2/c6x1).
@@ -125,6 +129,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(a) => serve::run(a),
         Command::Man(a) => man::run(a, Cli::command()),
         Command::Render(a) => render::run(*a),
+        Command::Play(a) => play::run(*a),
         Command::NormalMap(a) => normal_map::run(a),
         Command::Cubemap(a) => cubemap::run(a),
         Command::Pattern(a) => pattern::run(a),

@@ -18,6 +18,7 @@ pub mod frame;
 mod pass;
 pub mod ppp;
 mod projected;
+pub mod show;
 pub mod warp;
 
 use crate::error::{Error, Result};
@@ -44,6 +45,12 @@ pub const BLUR_WGSL: &str = concat!(
     "\n",
     include_str!("../../shaders/blur.wgsl")
 );
+/// The player's pass: a picture put on an output as it is.
+pub const SHOW_WGSL: &str = concat!(
+    include_str!("../../shaders/fullscreen.wgsl"),
+    "\n",
+    include_str!("../../shaders/show.wgsl")
+);
 /// Piecewise perspective projection.
 pub const PPP_WGSL: &str = concat!(
     include_str!("../../shaders/mesh.wgsl"),
@@ -57,8 +64,9 @@ pub fn warp_source() -> String {
 }
 
 /// Every shader module as the renderers compile it, by name (for validation).
-pub fn shader_modules() -> [(&'static str, String); 4] {
+pub fn shader_modules() -> [(&'static str, String); 5] {
     [
+        ("show", SHOW_WGSL.to_string()),
         ("warp", warp_source()),
         ("scene", SCENE_WGSL.to_string()),
         ("blur", BLUR_WGSL.to_string()),
@@ -74,6 +82,8 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     /// The chosen adapter: name, backend and device type.
     pub info: wgpu::AdapterInfo,
+    /// The adapter itself, for what a window's surface can take.
+    pub adapter: wgpu::Adapter,
 }
 
 /// How the adapter list is ranked: a real GPU first (discrete, then integrated), then software;
@@ -100,8 +110,21 @@ impl Gpu {
     pub fn new(wanted: Option<&str>) -> Result<Option<Gpu>> {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        Gpu::on(&instance, wanted, None)
+    }
+
+    /// [`Gpu::new`] on `instance`, among the adapters that can present to `surface` when one
+    /// is given (a window's, for the player).
+    pub fn on(
+        instance: &wgpu::Instance,
+        wanted: Option<&str>,
+        surface: Option<&wgpu::Surface>,
+    ) -> Result<Option<Gpu>> {
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+        if let Some(surface) = surface {
+            adapters.retain(|a| a.is_surface_supported(surface));
+        }
         adapters.sort_by_key(|a| rank(&a.get_info()));
         let chosen = match wanted {
             None => adapters.into_iter().next(),
@@ -143,6 +166,7 @@ impl Gpu {
             device,
             queue,
             info,
+            adapter,
         }))
     }
 

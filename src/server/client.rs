@@ -1,6 +1,7 @@
 //! A small blocking HTTP/1.1 client with keep-alive, enough to drive the daemon from tests,
-//! benchmarks and scripts without pulling in a client stack: requests with a body and headers,
-//! responses with `Content-Length` (all the daemon's non-streaming responses have one). Over
+//! benchmarks, scripts and the render node (`omniwarp play`) without pulling in a client stack:
+//! requests with a body and headers, responses with `Content-Length` (all the daemon's
+//! non-streaming responses have one), and the change feed read event by event. Over
 //! TLS it trusts the one certificate whose fingerprint it is given ([`Client::pinned`]).
 
 use std::io::{BufRead, BufReader, Read, Write};
@@ -15,6 +16,8 @@ pub struct Client {
     token: Option<String>,
     tls: Option<Arc<rustls::ClientConfig>>,
     conn: Option<BufReader<Box<dyn Stream>>>,
+    /// The socket under `conn`, to change its timeout once TLS wraps it.
+    tcp: Option<TcpStream>,
 }
 
 /// A connection, plain or TLS.
@@ -35,10 +38,7 @@ pub struct Reply {
 impl Reply {
     /// The value of header `name` (case-insensitive), if sent.
     pub fn header(&self, name: &str) -> Option<&str> {
-        self.headers
-            .iter()
-            .find(|(k, _)| k.eq_ignore_ascii_case(name))
-            .map(|(_, v)| v.as_str())
+        header(&self.headers, name)
     }
 
     /// The body as JSON; `Null` when it is not JSON.
@@ -62,6 +62,7 @@ impl Client {
             token,
             tls: None,
             conn: None,
+            tcp: None,
         }
     }
 
@@ -111,10 +112,36 @@ impl Client {
         headers: &[(&str, &str)],
         body: &[u8],
     ) -> std::io::Result<Reply> {
+        let (status, headers) = self.head(method, path, headers, body)?;
+        let conn = self.conn.as_mut().expect("connected by head");
+        let len: usize = header(&headers, "content-length")
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| bad("no Content-Length"))?;
+        let mut body = vec![0; len];
+        conn.read_exact(&mut body)?;
+        if header(&headers, "connection").is_some_and(|v| v.eq_ignore_ascii_case("close")) {
+            self.conn = None;
+        }
+        Ok(Reply {
+            status,
+            headers,
+            body,
+        })
+    }
+
+    /// Sends a request (connecting first if need be) and reads the status line and headers.
+    fn head(
+        &mut self,
+        method: &str,
+        path: &str,
+        headers: &[(&str, &str)],
+        body: &[u8],
+    ) -> std::io::Result<(u16, Vec<(String, String)>)> {
         if self.conn.is_none() {
             let s = TcpStream::connect_timeout(&self.addr, Duration::from_secs(5))?;
             s.set_read_timeout(Some(Duration::from_secs(120)))?;
             s.set_nodelay(true)?;
+            let tcp = s.try_clone()?;
             let stream: Box<dyn Stream> = match &self.tls {
                 None => Box::new(s),
                 Some(config) => {
@@ -130,6 +157,7 @@ impl Client {
                     Box::new(tls)
                 }
             };
+            self.tcp = Some(tcp);
             self.conn = Some(BufReader::new(stream));
         }
         let conn = self.conn.as_mut().expect("connected above");
@@ -157,7 +185,6 @@ impl Client {
         stream.write_all(req.as_bytes())?;
         stream.write_all(body)?;
         stream.flush()?;
-        let bad = |why: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string());
         let mut line = String::new();
         if conn.read_line(&mut line)? == 0 {
             return Err(bad("connection closed"));
@@ -179,28 +206,132 @@ impl Client {
                 headers.push((k.trim().to_string(), v.trim().to_string()));
             }
         }
-        let len: usize = headers
-            .iter()
-            .find(|(k, _)| k.eq_ignore_ascii_case("content-length"))
-            .and_then(|(_, v)| v.parse().ok())
-            .ok_or_else(|| bad("no Content-Length"))?;
-        let mut body = vec![0; len];
-        conn.read_exact(&mut body)?;
-        let close = headers
-            .iter()
-            .any(|(k, v)| k.eq_ignore_ascii_case("connection") && v.eq_ignore_ascii_case("close"));
-        if close {
-            self.conn = None;
+        Ok((status, headers))
+    }
+
+    /// `GET path` of a stream that does not end — the change feed — on a connection of its
+    /// own: the status, and the body to read event by event when it is 200. Each read waits at
+    /// most `patience` (the feed sends a keep-alive every 15 s, so a longer silence means the
+    /// daemon is gone).
+    pub fn feed(&mut self, path: &str, patience: Duration) -> std::io::Result<(u16, Feed)> {
+        self.conn = None;
+        let (status, headers) = self.head("GET", path, &[("Accept", "text/event-stream")], b"")?;
+        let conn = self.conn.take().expect("connected by head");
+        if let Some(tcp) = self.tcp.take() {
+            tcp.set_read_timeout(Some(patience))?;
         }
-        Ok(Reply {
+        let chunked = header(&headers, "transfer-encoding")
+            .is_some_and(|v| v.eq_ignore_ascii_case("chunked"));
+        let body = Dechunk {
+            conn,
+            chunked,
+            left: 0,
+            done: false,
+        };
+        Ok((
             status,
-            headers,
-            body,
-        })
+            Feed {
+                body: BufReader::new(body),
+            },
+        ))
     }
 
     /// `GET path`.
     pub fn get(&mut self, path: &str) -> std::io::Result<Reply> {
         self.send("GET", path, &[], b"")
+    }
+}
+
+fn bad(why: &str) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string())
+}
+
+fn header<'a>(headers: &'a [(String, String)], name: &str) -> Option<&'a str> {
+    headers
+        .iter()
+        .find(|(k, _)| k.eq_ignore_ascii_case(name))
+        .map(|(_, v)| v.as_str())
+}
+
+/// A response body of unknown length: HTTP/1.1 chunks decoded, or the bytes until the
+/// connection closes.
+struct Dechunk {
+    conn: BufReader<Box<dyn Stream>>,
+    chunked: bool,
+    /// Bytes left in the current chunk.
+    left: usize,
+    done: bool,
+}
+
+impl Read for Dechunk {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.done || buf.is_empty() {
+            return Ok(0);
+        }
+        if !self.chunked {
+            return self.conn.read(buf);
+        }
+        if self.left == 0 {
+            let mut line = String::new();
+            if self.conn.read_line(&mut line)? == 0 {
+                self.done = true;
+                return Ok(0);
+            }
+            let size = line.trim_end().split(';').next().unwrap_or("");
+            self.left =
+                usize::from_str_radix(size.trim(), 16).map_err(|_| bad("bad chunk size"))?;
+            if self.left == 0 {
+                self.done = true;
+                return Ok(0);
+            }
+        }
+        let want = buf.len().min(self.left);
+        let n = self.conn.read(&mut buf[..want])?;
+        if n == 0 {
+            return Err(bad("connection closed inside a chunk"));
+        }
+        self.left -= n;
+        if self.left == 0 {
+            let mut crlf = [0; 2];
+            self.conn.read_exact(&mut crlf)?;
+        }
+        Ok(n)
+    }
+}
+
+/// The change feed as it arrives ([`Client::feed`]).
+pub struct Feed {
+    body: BufReader<Dechunk>,
+}
+
+impl Feed {
+    /// The next event's data (its `data:` lines joined); `None` when the stream ended.
+    /// Comments (the keep-alives) are skipped.
+    pub fn event(&mut self) -> std::io::Result<Option<String>> {
+        let mut data = String::new();
+        let mut line = String::new();
+        loop {
+            line.clear();
+            if self.body.read_line(&mut line)? == 0 {
+                return Ok(None);
+            }
+            let l = line.trim_end_matches(['\r', '\n']);
+            if l.is_empty() {
+                if !data.is_empty() {
+                    return Ok(Some(data));
+                }
+                continue;
+            }
+            if let Some(d) = l.strip_prefix("data:") {
+                if !data.is_empty() {
+                    data.push('\n');
+                }
+                data.push_str(d.strip_prefix(' ').unwrap_or(d));
+            }
+            // A line this long is not the daemon's feed; stop rather than grow without end.
+            if data.len() > 1 << 20 {
+                return Err(bad("an event over 1 MiB"));
+            }
+        }
     }
 }

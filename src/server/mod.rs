@@ -14,7 +14,7 @@ pub mod tls;
 
 use http::guard;
 use routes::{
-    calib, captures, channels, console, exports, geometry, history, meshes, outputs, plan,
+    calib, captures, channels, console, exports, geometry, history, meshes, nodes, outputs, plan,
     renders as jobs, rig, show,
 };
 
@@ -100,6 +100,8 @@ routes! {
     "/v1/jobs/{id}/files/{name}" => get(jobs::file);
     "/v1/meshes" => get(meshes::list);
     "/v1/meshes/{name}" => put(meshes::put).delete(meshes::delete);
+    "/v1/nodes" => get(nodes::list);
+    "/v1/nodes/{id}" => put(nodes::put).delete(nodes::delete);
     "/v1/events" => get(rig::events);
 }
 

@@ -333,6 +333,7 @@ fn every_shader_and_its_cpu_twin_name_each_other() {
         ("shaders/blur.wgsl", &["src/render/blur.rs"]),
         ("shaders/mesh.wgsl", &["src/scene/raycast.rs"]),
         ("shaders/fullscreen.wgsl", &["src/render/mod.rs"]),
+        ("shaders/show.wgsl", &["src/play/headless.rs"]),
     ];
     let mut listed: Vec<&str> = twins.iter().map(|(s, _)| *s).collect();
     let mut present: Vec<String> = std::fs::read_dir(root().join("shaders"))

@@ -88,8 +88,13 @@ pub fn start(data: &Path, demo: bool) -> (Child, SocketAddr) {
 
 /// [`start`] with more arguments for `serve`.
 pub fn start_with(data: &Path, demo: bool, extra: &[&str]) -> (Child, SocketAddr) {
+    start_on("127.0.0.1:0", data, demo, extra)
+}
+
+/// [`start_with`] on the address `bind` (a daemon restarted where its clients look for it).
+pub fn start_on(bind: &str, data: &Path, demo: bool, extra: &[&str]) -> (Child, SocketAddr) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_omniwarp"));
-    cmd.args(["serve", "--bind", "127.0.0.1:0", "--data"])
+    cmd.args(["serve", "--bind", bind, "--data"])
         .arg(data)
         .stdout(Stdio::piped())
         .stderr(Stdio::null());

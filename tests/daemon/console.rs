@@ -152,6 +152,63 @@ async fn a_test_card_is_sent_with_a_revision_announced_and_put_out() {
 }
 
 #[tokio::test]
+async fn a_pattern_frame_is_put_out_as_the_pattern_route_draws_it_and_refused_by_name() {
+    let s = state(None, None);
+    let send = |body: serde_json::Value, rev: u64| {
+        write("PUT", "/v1/channels/left/show", Some(rev), body.to_string())
+    };
+    for (body, field) in [
+        (serde_json::json!({"show": "pattern"}), "/frame"),
+        (
+            serde_json::json!({"show": "pattern", "frame": 100000}),
+            "/frame",
+        ),
+        (
+            serde_json::json!({"show": "pattern", "frame": 1, "period": 3}),
+            "/period",
+        ),
+        (
+            serde_json::json!({"show": "pattern", "frame": 1, "code": "morse"}),
+            "/code",
+        ),
+        (serde_json::json!({"show": "grid", "frame": 1}), "/frame"),
+        (
+            serde_json::json!({"show": "content", "period": 16}),
+            "/period",
+        ),
+    ] {
+        let (st, _, b) = call(&s, send(body.clone(), 1)).await;
+        assert_eq!(
+            (st, json(&b)["field"].as_str()),
+            (StatusCode::BAD_REQUEST, Some(field)),
+            "{body}"
+        );
+    }
+    let body = serde_json::json!({"show": "pattern", "frame": 3, "code": "xor"});
+    assert_eq!(call(&s, send(body.clone(), 1)).await.0, StatusCode::OK);
+    let (_, _, shown) = call(&s, get("/v1/channels/left/show")).await;
+    assert_eq!(
+        json(&shown),
+        serde_json::json!({"show": "pattern", "frame": 3, "code": "xor", "revision": 2})
+    );
+    let (st, h, png) = call(&s, get("/v1/channels/left/output.png")).await;
+    assert_eq!(st, StatusCode::OK);
+    let (_, _, frame) = call(&s, get("/v1/channels/left/pattern/3?code=xor")).await;
+    assert!(png == frame, "not the frame the pattern route draws");
+    // The node's revalidation: the same ETag is a 304, without the picture.
+    let tag = h[header::ETAG].to_str().unwrap().to_string();
+    assert!(tag.contains("show-2-pattern"), "{tag}");
+    let again = Request::get("/v1/channels/left/output.png")
+        .header(header::IF_NONE_MATCH, &tag)
+        .body(Body::empty())
+        .unwrap();
+    let (st, _, body) = call(&s, again).await;
+    assert_eq!((st, body.len()), (StatusCode::NOT_MODIFIED, 0));
+    let (st, _, _) = call(&s, get("/v1/channels/left/output.png?scale=2")).await;
+    assert_eq!(st, StatusCode::BAD_REQUEST);
+}
+
+#[tokio::test]
 async fn the_geometry_draws_each_projector_onto_the_wall() {
     let s = state(None, None);
     let (st, h, body) = call(&s, get("/v1/rig/geometry")).await;

@@ -1543,6 +1543,8 @@ fn the_limits_are_documented_where_users_read_them() {
         l::CAPTURE_SLOTS.to_string(),
         l::MEDIA_SIDE.to_string(),
         l::MESHES.to_string(),
+        l::NODES.to_string(),
+        l::NODE_OUTPUTS.to_string(),
         l::PLAN_PICTURE_WIDTH[1].to_string(),
         l::PLAN_STEP[0].to_string(),
         omniwarp::server::STREAMS.to_string(),

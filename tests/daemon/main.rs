@@ -1,5 +1,5 @@
 //! The daemon: routes through `oneshot`, the real binary under load and SIGKILL, durability,
-//! history, hostile clients and the console's side.
+//! history, hostile clients, the console's side and the render nodes that follow it.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -12,6 +12,7 @@ mod durability;
 mod history;
 mod hostile;
 mod jobs;
+mod play;
 mod pressure;
 mod server;
 mod server_edit;

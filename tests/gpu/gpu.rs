@@ -333,5 +333,5 @@ fn every_shader_validates_with_naga() {
         .unwrap_or_else(|e| panic!("{name}: {e:?}"));
         seen += 1;
     }
-    assert_eq!(seen, 4, "a shader module was added or removed");
+    assert_eq!(seen, 5, "a shader module was added or removed");
 }

@@ -7,7 +7,8 @@ use crate::cli::args::{
     parse_size, parse_vec3,
 };
 use crate::cli::io::{
-    AnyContent, AnyRaster, channel, is_exr, load_content, read_rig, read_tiles, write_output,
+    AnyContent, AnyRaster, channel, is_exr, load_content, read_rig, read_tiles, render_inputs,
+    signal_mask, write_output,
 };
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
@@ -21,7 +22,7 @@ use omniwarp::projection::View;
 use omniwarp::raster::Raster;
 use omniwarp::render::blur::Blur;
 use omniwarp::render::{self, Warp};
-use omniwarp::rig::{Channel, Rig, apply_gains, signal_gains};
+use omniwarp::rig::apply_gains;
 use omniwarp::scene::ppp::{Pieces, Tolerance};
 use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
@@ -261,35 +262,6 @@ fn eye_view(a: &RenderArgs, path: &Path) -> Result<NormalMap> {
         .map_err(flag_error)?;
     let view = a.projection.view(w, h)?;
     rig.eye_view(&view, w, h, centre).map_err(flag_error)
-}
-
-/// A channel's warp map (for a panorama projected from `project_from`, if given) and its blend
-/// mask in signal space, for `render --rig`.
-pub fn render_inputs(
-    path: &Path,
-    id: &str,
-    gamma: f64,
-    project_from: Option<DVec3>,
-) -> Result<(NormalMap, Vec<f32>)> {
-    let rig = read_rig(path)?;
-    let ch = channel(&rig, id)?;
-    let w = rig.warp(ch);
-    let mask = signal_mask(&rig, ch, &w.points, gamma)?;
-    let map = match project_from {
-        Some(c) => {
-            let c = rig.check_centre(c, "project-from").map_err(flag_error)?;
-            let never = std::sync::atomic::AtomicBool::new(false);
-            rig.projected(&w.map, Some(&w.points), c, &never)
-                .expect("never cancelled")
-        }
-        None => w.map,
-    };
-    Ok((map, mask))
-}
-
-/// The blend weights of a channel's pixels in signal space, m = w^(1/γ).
-fn signal_mask(rig: &Rig, ch: &Channel, points: &[Option<DVec3>], gamma: f64) -> Result<Vec<f32>> {
-    signal_gains(&rig.blend_weights(ch, points), gamma).map_err(flag_error)
 }
 
 /// The content panorama as the scene renderers take it (8-bit, looked up exactly), projected

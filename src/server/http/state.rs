@@ -119,6 +119,8 @@ pub struct AppState {
     pub captures: Captures,
     /// Render jobs and the media folder they read from.
     pub renders: crate::server::renders::Renders,
+    /// The render nodes following the daemon, as they last reported.
+    pub nodes: super::nodes::Nodes,
 }
 
 impl AppState {
@@ -159,6 +161,7 @@ impl AppState {
             shows: Default::default(),
             captures: Default::default(),
             renders,
+            nodes: Default::default(),
         })
     }
 
@@ -174,25 +177,44 @@ impl AppState {
     }
 }
 
-/// What each channel shows (see `show.rs`): per channel id, the revision of the choice and the
-/// test card shown (`None`: its content).
+/// What a channel shows (see `show.rs`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum Shown {
+    /// Its content.
+    #[default]
+    Content,
+    /// A test card.
+    Card(Card),
+    /// Frame `frame` of its structured-light sequence, with the sequence's period and code as
+    /// `GET …/pattern/{n}` takes them (their defaults when `None`).
+    Pattern {
+        /// The frame, from 0.
+        frame: usize,
+        /// The phase period, projector pixels.
+        period: Option<u32>,
+        /// The code's name.
+        code: Option<String>,
+    },
+}
+
+/// What each channel shows: per channel id, the revision of the choice and the choice.
 #[derive(Default)]
-pub struct Shows(Mutex<HashMap<String, (u64, Option<Card>)>>);
+pub struct Shows(Mutex<HashMap<String, (u64, Shown)>>);
 
 impl Shows {
-    pub fn get(&self, id: &str) -> (u64, Option<Card>) {
+    pub fn get(&self, id: &str) -> (u64, Shown) {
         let map = self.0.lock().expect("shows lock");
-        map.get(id).copied().unwrap_or((1, None))
+        map.get(id).cloned().unwrap_or((1, Shown::Content))
     }
 
-    /// Shows `card` on channel `id` if `wanted` is the current revision; the new revision.
-    pub fn set(&self, id: &str, wanted: u64, card: Option<Card>) -> Result<u64, ApiError> {
+    /// Shows `shown` on channel `id` if `wanted` is the current revision; the new revision.
+    pub fn set(&self, id: &str, wanted: u64, shown: Shown) -> Result<u64, ApiError> {
         let mut map = self.0.lock().expect("shows lock");
-        let entry = map.entry(id.to_string()).or_insert((1, None));
+        let entry = map.entry(id.to_string()).or_insert((1, Shown::Content));
         if entry.0 != wanted {
             return Err(ApiError::Stale { current: entry.0 });
         }
-        *entry = (entry.0 + 1, card);
+        *entry = (entry.0 + 1, shown);
         Ok(entry.0)
     }
 }

@@ -1,7 +1,7 @@
 //! The routes, one file per resource: the rig and its channels, their documents (content canvas,
 //! tile screens) and history, the outputs (warp maps, blends, previews, test cards, exports), the
-//! camera calibration (patterns, captures, proposals), meshes, scenes, render jobs and the
-//! console's assets.
+//! camera calibration (patterns, captures, proposals), meshes, scenes, render jobs, the render
+//! nodes that follow the daemon and the console's assets.
 
 pub mod calib;
 pub mod captures;
@@ -11,6 +11,7 @@ pub mod exports;
 pub mod geometry;
 pub mod history;
 pub mod meshes;
+pub mod nodes;
 pub mod outputs;
 pub mod plan;
 pub mod renders;

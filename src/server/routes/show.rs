@@ -1,26 +1,61 @@
-//! What each channel shows: its content (the default) or a test card sent by a technician
-//! (`src/content/testcard.rs`). The choice is a resource like the others — a revision, writes
-//! with `If-Match`, a `show` event on the change feed — but it is kept in memory only: a test
-//! card is for the minutes of an alignment, and after a restart every channel shows its content
-//! again. `output.png` is the image the channel should put out now, so a player that follows
-//! the feed and fetches it shows what the console sent.
+//! What each channel shows: its content (the default), a test card sent by a technician
+//! (`src/content/testcard.rs`) or a frame of its structured-light sequence, for a calibration
+//! loop to capture through the projector. The choice is a resource like the others — a
+//! revision, writes with `If-Match`, a `show` event on the change feed — but it is kept in
+//! memory only: a test card is for the minutes of an alignment, and after a restart every
+//! channel shows its content again. `output.png` is the image the channel should put out now,
+//! so the render node that follows the feed (`omniwarp play`) shows what the console sent.
 
 use super::outputs::{self, RenderQuery};
 use crate::content::testcard::{self, Card, Label};
 use crate::image_io::{Compression, png_bytes_with};
 use crate::server::ApiError;
 use crate::server::http::jobs::{job, run_job};
-use crate::server::http::state::{AppState, Query, if_match, parse_body, tagged};
+use crate::server::http::state::{AppState, Query, Shown, if_match, parse_body, tagged};
 use crate::server::previews::pattern::Grid;
+use crate::structured::PatternSet;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
-use axum::http::HeaderMap;
-use axum::response::Response;
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use std::sync::Arc;
 
-fn name(card: Option<Card>) -> &'static str {
-    card.map_or("content", Card::name)
+/// The choice as the API writes it.
+fn described(shown: &Shown) -> serde_json::Value {
+    match shown {
+        Shown::Content => serde_json::json!({"show": "content"}),
+        Shown::Card(c) => serde_json::json!({"show": c.name()}),
+        Shown::Pattern {
+            frame,
+            period,
+            code,
+        } => {
+            let mut v = serde_json::json!({"show": "pattern", "frame": frame});
+            if let Some(p) = period {
+                v["period"] = (*p).into();
+            }
+            if let Some(c) = code {
+                v["code"] = c.clone().into();
+            }
+            v
+        }
+    }
+}
+
+/// The structured-light sequence a pattern show names, checked against the channel.
+fn sequence(
+    s: &AppState,
+    id: &str,
+    period: Option<u32>,
+    code: Option<&str>,
+) -> Result<PatternSet, ApiError> {
+    let named = super::captures::Named {
+        period,
+        code,
+        at: "/",
+    };
+    super::captures::sequence(s, id, named)
 }
 
 /// The channel's index in the rig, 404 for an id the rig does not have.
@@ -37,17 +72,25 @@ pub async fn get_show(
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     index_of(&s, &id)?;
-    let (revision, card) = s.shows.get(&id);
-    Ok(tagged(
-        serde_json::json!({"revision": revision, "show": name(card)}),
-        revision,
-    ))
+    let (revision, shown) = s.shows.get(&id);
+    let mut body = described(&shown);
+    body["revision"] = revision.into();
+    Ok(tagged(body, revision))
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ShowBody {
     show: String,
+    /// With `pattern`: the frame of the structured-light sequence.
+    #[serde(default)]
+    frame: Option<usize>,
+    /// With `pattern`: the sequence's phase period.
+    #[serde(default)]
+    period: Option<u32>,
+    /// With `pattern`: the sequence's code.
+    #[serde(default)]
+    code: Option<String>,
 }
 
 pub async fn put_show(
@@ -59,14 +102,42 @@ pub async fn put_show(
     index_of(&s, &id)?;
     let wanted = if_match(&headers)?;
     let b: ShowBody = parse_body(&body)?;
-    let card = match b.show.as_str() {
-        "content" => None,
-        other => Some(Card::parse(other).map_err(|e| ApiError::Invalid {
-            field: "/show".into(),
-            reason: format!("{}; or content", e.reason()),
-        })?),
+    let shown = match b.show.as_str() {
+        "pattern" => {
+            let frame = b.frame.ok_or_else(|| ApiError::Invalid {
+                field: "/frame".into(),
+                reason: "needed with show pattern: the frame of the channel's sequence".into(),
+            })?;
+            let set = sequence(&s, &id, b.period, b.code.as_deref())?;
+            set.frame(frame, "/frame")?;
+            Shown::Pattern {
+                frame,
+                period: b.period,
+                code: b.code,
+            }
+        }
+        other => {
+            if b.frame.is_some() || b.period.is_some() || b.code.is_some() {
+                let field = match (b.frame, b.period) {
+                    (Some(_), _) => "/frame",
+                    (None, Some(_)) => "/period",
+                    (None, None) => "/code",
+                };
+                return Err(ApiError::Invalid {
+                    field: field.into(),
+                    reason: "only with show pattern".into(),
+                });
+            }
+            match other {
+                "content" => Shown::Content,
+                card => Shown::Card(Card::parse(card).map_err(|e| ApiError::Invalid {
+                    field: "/show".into(),
+                    reason: format!("{}; or content, or pattern", e.reason()),
+                })?),
+            }
+        }
     };
-    let revision = { s.shows.set(&id, wanted, card)? };
+    let revision = { s.shows.set(&id, wanted, shown)? };
     s.announce(serde_json::json!({"kind": "show", "channel": id, "revision": revision}));
     Ok(tagged(serde_json::json!({"revision": revision}), revision))
 }
@@ -78,17 +149,68 @@ pub struct OutputQuery {
     scale: Option<u32>,
 }
 
+/// A 304 when the client's `If-None-Match` names `etag`: a render node revalidating the
+/// picture it shows costs no render and no transfer.
+fn unchanged(headers: &HeaderMap, etag: &str) -> Option<Response> {
+    let asked = headers.get(header::IF_NONE_MATCH)?.to_str().ok()?;
+    asked.split(',').any(|t| t.trim() == etag).then(|| {
+        let mut r = StatusCode::NOT_MODIFIED.into_response();
+        if let Ok(v) = etag.parse() {
+            r.headers_mut().insert(header::ETAG, v);
+        }
+        r
+    })
+}
+
 pub async fn output(
     State(s): State<Arc<AppState>>,
     Path(id): Path<String>,
     Query(q): Query<OutputQuery>,
+    headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let index = index_of(&s, &id)?;
     let scale = q.scale.unwrap_or(1);
-    let (revision, card) = s.shows.get(&id);
-    let Some(card) = card else {
-        // The content: the daemon's preview of the channel, as `render` draws it.
-        return outputs::render(State(s), Path(id), Query(RenderQuery::at_scale(scale))).await;
+    let (revision, shown) = s.shows.get(&id);
+    let card = match shown {
+        Shown::Card(card) => card,
+        Shown::Content => {
+            // The content: the daemon's preview of the channel, as `render` draws it, tagged
+            // as the preview is (by the warp it is drawn through).
+            if scale == 1 {
+                let j = job(&s, &id).await?;
+                if let Some(r) = unchanged(&headers, &j.etag()) {
+                    return Ok(r);
+                }
+            }
+            let q = RenderQuery::at_scale(scale);
+            return outputs::render(State(s), Path(id), Query(q)).await;
+        }
+        Shown::Pattern {
+            frame,
+            period,
+            code,
+        } => {
+            if scale != 1 {
+                return Err(ApiError::Invalid {
+                    field: "scale".into(),
+                    reason: "a pattern frame is put out at the channel's resolution (1)".into(),
+                });
+            }
+            let set = sequence(&s, &id, period, code.as_deref())?;
+            let f = set.frame(frame, "frame")?;
+            let etag = format!(
+                "\"show-{revision}-pattern-{}x{}-p{}-{}-{frame}\"",
+                set.width,
+                set.height,
+                set.period,
+                set.code.name()
+            );
+            if let Some(r) = unchanged(&headers, &etag) {
+                return Ok(r);
+            }
+            let png = run_job(&s, move |_| Ok(set.image(f).png()?)).await?;
+            return outputs::file(&s, png, "image/png", &etag);
+        }
     };
     if ![1, 2, 4, 8].contains(&scale) {
         return Err(ApiError::Invalid {
@@ -99,6 +221,9 @@ pub async fn output(
     let j = job(&s, &id).await?;
     let computed = j.computed.clone();
     let etag = format!("\"show-{revision}-{}\"", j.etag().trim_matches('"'));
+    if let Some(r) = unchanged(&headers, &etag) {
+        return Ok(r);
+    }
     let png = run_job(&s, move |_| {
         let k = scale as usize;
         let map = Grid::new(computed.map.width(), computed.map.height(), k).map(&computed.map)?;
