@@ -3,7 +3,7 @@
 
 import { Api, ApiError } from './api.js';
 import { ChannelView } from './channel.js';
-import { CalibrationPanel, ContentPanel, ExportPanel, HistoryPanel, PatternPanel } from './panels.js';
+import { CalibrationPanel, ContentPanel, ExportPanel, HistoryPanel, NodesPanel, PatternPanel } from './panels.js';
 import { RigView } from './rig3d.js';
 import { affects, channelColour } from './tiles.js';
 
@@ -34,6 +34,10 @@ class App {
     this.calibration = new CalibrationPanel(this);
     this.exports = new ExportPanel(this);
     this.historyPanel = new HistoryPanel(this);
+    this.nodes = new NodesPanel(this);
+    // Nodes report every second without a change on the feed; their list is read again now
+    // and then so that one gone quiet shows as such.
+    setInterval(() => this.nodes.load().catch(() => {}), 5000);
     this.stopFeed = null;
     $('#token-form').addEventListener('submit', (e) => {
       e.preventDefault();
@@ -152,7 +156,7 @@ class App {
     this.rig.selected = this.channel;
     this.rig.set(geometry.body);
     if (!$('#panel-overview').hidden) this.loadPlan();
-    await Promise.all([this.select(this.channel), this.historyPanel.load()]);
+    await Promise.all([this.select(this.channel), this.historyPanel.load(), this.nodes.load()]);
   }
 
   drawChannels() {
@@ -212,6 +216,10 @@ class App {
     try {
       if (change.kind === 'rig') {
         if (change.revision !== this.rigRevision) await this.loadRig();
+        return;
+      }
+      if (change.kind === 'node') {
+        await this.nodes.load();
         return;
       }
       if (change.channel) this.channelStatus(change.channel);

@@ -1,6 +1,6 @@
 // The panels beside a channel's preview: its content canvas (fields and an aiming pad), the
-// test cards it can be sent, calibration from uploaded correspondences, exports, and the
-// history. Each reads and writes through /v1 only.
+// test cards it can be sent, calibration from uploaded correspondences, exports, the history
+// and the render nodes. Each reads and writes through /v1 only.
 
 import { ApiError } from './api.js';
 import { angles, direction, parseCorrespondences, pinchRatio } from './tiles.js';
@@ -549,5 +549,33 @@ export class HistoryPanel {
     } catch (e) {
       this.app.notify(this.app.describe(e), 'error');
     }
+  }
+}
+
+// The render nodes following the daemon (`omniwarp play`, docs/player.md), as each last
+// reported: the channels its outputs show, whether it is muted, its last error; one not heard
+// from for a few seconds (it reports every second) is marked silent.
+export class NodesPanel {
+  constructor(app) {
+    this.app = app;
+  }
+
+  async load() {
+    const { body } = await this.app.api.get('/v1/nodes');
+    const list = $('#nodes');
+    if (!body.nodes.length) {
+      list.replaceChildren(el('li', {}, 'none has reported'));
+      return;
+    }
+    list.replaceChildren(
+      ...body.nodes.map((n) => {
+        const outputs = n.outputs.map((o) => o.channel).join(', ');
+        const muted = n.black ? ' · muted to black' : '';
+        const silent = n.age_seconds > 3 ? ` · silent for ${Math.round(n.age_seconds)} s` : '';
+        const li = el('li', { 'data-node': n.id }, `${n.id}: ${outputs}${muted}${silent}`);
+        if (n.error) li.append(el('div', { class: 'node-error' }, n.error));
+        return li;
+      }),
+    );
   }
 }

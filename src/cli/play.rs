@@ -55,6 +55,10 @@ pub struct PlayArgs {
     /// Where --headless writes.
     #[arg(long, requires = "headless")]
     out: Option<PathBuf>,
+    /// Start with the operator's overlay on every output (the `o` key toggles it): the
+    /// channel's id large, what it shows, its rates and the time.
+    #[arg(long)]
+    overlay: bool,
     /// Use the first GPU adapter whose name or backend contains this.
     #[arg(long)]
     adapter: Option<String>,
@@ -79,17 +83,21 @@ pub fn run(a: PlayArgs) -> Result<()> {
         let (tx, rx) = std::sync::mpsc::channel();
         let once = matches!(source, Source::Pictures(_));
         source.start(outputs.clone(), status.clone(), stop.clone(), tx);
-        return play::headless::run(&outputs, dir, rx, status, stop, once, a.adapter.as_deref())
-            .map_err(flag_error);
+        let options = play::headless::Options {
+            once,
+            overlay: a.overlay,
+            adapter: a.adapter.as_deref(),
+        };
+        return play::headless::run(&outputs, dir, rx, status, stop, options).map_err(flag_error);
     }
     let (s, st) = (stop.clone(), status.clone());
-    play::windows::run(
-        outputs.clone(),
-        status,
-        stop,
-        a.adapter.clone(),
-        move |proxy| source.start(outputs, st, s, proxy),
-    )
+    let options = play::windows::Options {
+        adapter: a.adapter.clone(),
+        overlay: a.overlay,
+    };
+    play::windows::run(outputs.clone(), status, stop, options, move |proxy| {
+        source.start(outputs, st, s, proxy)
+    })
     .map_err(flag_error)
 }
 

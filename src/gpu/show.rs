@@ -17,7 +17,8 @@ pub struct ShowPass {
 
 /// A picture on the device, ready to be shown on one output.
 pub struct Picture {
-    texture: wgpu::Texture,
+    /// Kept with the bind group that reads it.
+    _texture: wgpu::Texture,
     uniform: wgpu::Buffer,
     bind: wgpu::BindGroup,
     /// Its size in pixels.
@@ -111,7 +112,7 @@ impl ShowPass {
             ],
         });
         Ok(Picture {
-            texture,
+            _texture: texture,
             uniform,
             bind,
             size: (w, h),
@@ -220,21 +221,38 @@ impl ShowPass {
         black: bool,
         size: (u32, u32),
     ) -> Result<Raster<[u8; 4]>> {
-        let target = output(gpu, size.0, size.1);
-        let view = target.create_view(&Default::default());
-        self.draw(
-            gpu,
-            picture,
-            black,
-            (&view, wgpu::TextureFormat::Rgba8Unorm, size),
-        );
-        read_rgba8(gpu, &target, size.0, size.1)
+        let target = Offscreen::new(gpu, size);
+        self.draw(gpu, picture, black, target.target());
+        target.read(gpu)
     }
 }
 
-impl Picture {
-    /// The texture holding it.
-    pub fn texture(&self) -> &wgpu::Texture {
-        &self.texture
+/// An output off screen: an RGBA8 texture to draw into and read back.
+pub struct Offscreen {
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+    size: (u32, u32),
+}
+
+impl Offscreen {
+    /// An output of `size` pixels.
+    pub fn new(gpu: &Gpu, size: (u32, u32)) -> Self {
+        let texture = output(gpu, size.0, size.1);
+        let view = texture.create_view(&Default::default());
+        Offscreen {
+            texture,
+            view,
+            size,
+        }
+    }
+
+    /// What [`ShowPass::draw`] draws into.
+    pub fn target(&self) -> (&wgpu::TextureView, wgpu::TextureFormat, (u32, u32)) {
+        (&self.view, wgpu::TextureFormat::Rgba8Unorm, self.size)
+    }
+
+    /// Its pixels.
+    pub fn read(&self, gpu: &Gpu) -> Result<Raster<[u8; 4]>> {
+        read_rgba8(gpu, &self.texture, self.size.0, self.size.1)
     }
 }

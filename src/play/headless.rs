@@ -4,7 +4,7 @@
 //! showed. Without any adapter the pictures are written as they came, which is what the pass
 //! (`shaders/show.wgsl`) would have put out: it copies pixels unchanged (tested).
 
-use super::{Output, State, Status, Stop, Update, stopping};
+use super::{Output, State, Status, Stop, Update, overlay, overlay_lines, stopping};
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu::show::ShowPass;
@@ -14,6 +14,16 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
+/// How the headless node runs.
+pub struct Options<'a> {
+    /// Stop once every output has been written once.
+    pub once: bool,
+    /// Draw the operator's overlay into the pictures.
+    pub overlay: bool,
+    /// The GPU adapter to use, by a part of its name or backend.
+    pub adapter: Option<&'a str>,
+}
+
 /// Writes each output's pictures as they arrive on `updates` until `stop` is set, the senders
 /// are gone, or — with `once` — every output has been written once.
 pub fn run(
@@ -22,9 +32,13 @@ pub fn run(
     updates: Receiver<Update>,
     status: Arc<Status>,
     stop: Stop,
-    once: bool,
-    adapter: Option<&str>,
+    options: Options,
 ) -> Result<()> {
+    let Options {
+        once,
+        overlay: overlaid,
+        adapter,
+    } = options;
     let mut seen = std::collections::HashSet::new();
     for o in outputs {
         if !seen.insert(&o.channel) {
@@ -66,13 +80,21 @@ pub fn run(
         let Some(output) = outputs.get(p.output) else {
             continue;
         };
+        let image = match overlaid {
+            true => overlay(
+                &p.image,
+                &output.channel,
+                &overlay_lines(&status.get(), p.output),
+            ),
+            false => p.image,
+        };
         let image = match (&gpu, &mut pass) {
             (Some(g), Some(pass)) => {
-                let size = (p.image.width as u32, p.image.height as u32);
-                let picture = pass.upload(g, &p.image)?;
+                let size = (image.width as u32, image.height as u32);
+                let picture = pass.upload(g, &image)?;
                 pass.render(g, &picture, false, size)?
             }
-            _ => p.image,
+            _ => image,
         };
         write_png(&dir.join(format!("{}.png", output.channel)), &image)?;
         shown[p.output] = true;

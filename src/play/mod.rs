@@ -218,6 +218,63 @@ impl Rate {
     }
 }
 
+/// The operator's overlay on an output (`o` in a window, `--overlay`): the picture darkened
+/// behind a box in its middle, the output's channel id large in it — which beam is which — and
+/// `lines` (what it shows, its rates, the time) beneath.
+pub fn overlay(img: &Raster<[u8; 4]>, channel: &str, lines: &[String]) -> Raster<[u8; 4]> {
+    use crate::content::testcard::text_in;
+    let (w, h) = (img.width, img.height);
+    let mut out = img.clone();
+    let (x0, x1, y0, y1) = (w / 8, w - w / 8, h / 4, h - h / 4);
+    for y in y0..y1 {
+        for p in &mut out.data[y * w + x0..y * w + x1] {
+            *p = [p[0] / 4, p[1] / 4, p[2] / 4, 255];
+        }
+    }
+    let white = [255, 255, 255, 255];
+    let fit = |height: usize, chars: usize| (height / 8).min((x1 - x0) / (8 * chars + 8)).max(1);
+    let big = fit(h / 6, channel.chars().count().max(1));
+    text_in(&mut out, channel, w / 2, h * 2 / 5, big, white);
+    let longest = lines.iter().map(|l| l.chars().count()).max().unwrap_or(1);
+    let small = fit(h / 30, longest);
+    for (k, line) in lines.iter().enumerate() {
+        let y = h * 11 / 20 + k * small * 12;
+        text_in(&mut out, line, w / 2, y, small, white);
+    }
+    out
+}
+
+/// The overlay's lines for output `i` as `status` has it: the picture's tag, its frames and the
+/// node's rates, and the time of day (UTC), which a camera filming several walls can be lined
+/// up by.
+pub fn overlay_lines(state: &State, i: usize) -> Vec<String> {
+    let (_, tag, frames) = &state.outputs[i];
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis())
+        .unwrap_or(0);
+    let t = secs / 1000 % 86_400;
+    let clock = format!(
+        "{:02}:{:02}:{:02}.{:03} UTC",
+        t / 3600,
+        t / 60 % 60,
+        t % 60,
+        secs % 1000
+    );
+    let mut lines = vec![
+        format!("showing {}", tag.as_deref().unwrap_or("nothing yet")),
+        format!(
+            "{frames} frames, {:.0} fps, {} dropped",
+            state.fps, state.dropped
+        ),
+        clock,
+    ];
+    if let Some(e) = &state.error {
+        lines.push(e.chars().take(80).collect());
+    }
+    lines
+}
+
 /// Set once the node is asked to stop (SIGTERM, Ctrl-C, the window closed).
 pub type Stop = Arc<AtomicBool>;
 

@@ -3,13 +3,16 @@
 //! when its picture changes or the system asks. Presentation is FIFO, the mode every surface
 //! offers and the one that never tears; the pictures themselves change only between frames.
 //!
-//! Keys: `b` mutes every output to black and back (the picture is kept). Closing a window,
-//! SIGTERM or Ctrl-C (the `stop` flag) ends the node.
+//! Keys: `b` mutes every output to black and back (the picture is kept); `o` puts the
+//! operator's overlay on every output and takes it off (`--overlay` starts with it): the
+//! channel's id large, what it shows, its rates and the time, redrawn every second. Closing a
+//! window, SIGTERM or Ctrl-C (the `stop` flag) ends the node.
 
-use super::{Deliver, Output, Place, Rate, Status, Stop, Update, stopping};
+use super::{Deliver, Output, Place, Rate, Status, Stop, Update, overlay, overlay_lines, stopping};
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu::show::{Picture, ShowPass};
+use crate::raster::Raster;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use winit::application::ApplicationHandler;
@@ -25,13 +28,21 @@ impl Deliver for EventLoopProxy<Update> {
     }
 }
 
+/// How the windows start.
+pub struct Options {
+    /// The GPU adapter to use, by a part of its name or backend.
+    pub adapter: Option<String>,
+    /// Whether the operator's overlay is on from the start.
+    pub overlay: bool,
+}
+
 /// Opens the display; `start` is then given a sender for the pictures (it starts whatever
 /// makes them) before the windows open and the loop runs until `stop`.
 pub fn run(
     outputs: Vec<Output>,
     status: Arc<Status>,
     stop: Stop,
-    adapter: Option<String>,
+    options: Options,
     start: impl FnOnce(EventLoopProxy<Update>),
 ) -> Result<()> {
     let event_loop = EventLoop::<Update>::with_user_event()
@@ -47,11 +58,13 @@ pub fn run(
         outputs,
         status,
         stop,
-        adapter,
+        adapter: options.adapter,
         screens: Vec::new(),
         gpu: None,
         pass: None,
         black: false,
+        overlay: options.overlay,
+        overlaid: Instant::now(),
         rate: Rate::default(),
         failed: None,
     };
@@ -70,7 +83,9 @@ struct Screen {
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     picture: Option<Picture>,
-    /// The tag of `picture`, reported once it has been presented.
+    /// The picture as it came, kept for the overlay to be drawn over.
+    image: Option<Raster<[u8; 4]>>,
+    /// The tag of a new picture, reported once it has been presented.
     tag: Option<String>,
 }
 
@@ -83,6 +98,9 @@ struct App {
     gpu: Option<Gpu>,
     pass: Option<ShowPass>,
     black: bool,
+    overlay: bool,
+    /// When the overlay was last drawn.
+    overlaid: Instant,
     rate: Rate,
     /// Why the loop ended early, if it did.
     failed: Option<Error>,
@@ -177,12 +195,42 @@ impl App {
                 surface,
                 config,
                 picture: None,
+                image: None,
                 tag: None,
             });
         }
         self.pass = Some(ShowPass::new(&gpu));
         self.gpu = Some(gpu);
         Ok(())
+    }
+
+    /// Uploads output `i`'s picture, with the overlay over it when it is on, and asks for a
+    /// redraw.
+    fn refresh(&mut self, i: usize) {
+        let (Some(gpu), Some(pass)) = (&self.gpu, &self.pass) else {
+            return;
+        };
+        let screen = &mut self.screens[i];
+        let Some(image) = &screen.image else {
+            return;
+        };
+        let uploaded = if self.overlay {
+            let lines = overlay_lines(&self.status.get(), i);
+            pass.upload(gpu, &overlay(image, &self.outputs[i].channel, &lines))
+        } else {
+            pass.upload(gpu, image)
+        };
+        match uploaded {
+            Ok(picture) => {
+                screen.picture = Some(picture);
+                screen.window.request_redraw();
+            }
+            Err(e) => {
+                let e = e.to_string();
+                eprintln!("{e}");
+                self.status.update(true, |s| s.error = Some(e));
+            }
+        }
     }
 
     fn redraw(&mut self, i: usize) {
@@ -251,23 +299,10 @@ impl ApplicationHandler<Update> for App {
     fn user_event(&mut self, event_loop: &ActiveEventLoop, event: Update) {
         match event {
             Update::Picture(p) => {
-                let (Some(gpu), Some(pass)) = (&self.gpu, &self.pass) else {
-                    return;
-                };
-                let Some(screen) = self.screens.get_mut(p.output) else {
-                    return;
-                };
-                match pass.upload(gpu, &p.image) {
-                    Ok(picture) => {
-                        screen.picture = Some(picture);
-                        screen.tag = Some(p.tag);
-                        screen.window.request_redraw();
-                    }
-                    Err(e) => {
-                        let e = e.to_string();
-                        eprintln!("{e}");
-                        self.status.update(true, |s| s.error = Some(e));
-                    }
+                if let Some(screen) = self.screens.get_mut(p.output) {
+                    screen.image = Some(p.image);
+                    screen.tag = Some(p.tag);
+                    self.refresh(p.output);
                 }
             }
             Update::Error(e) => {
@@ -298,14 +333,21 @@ impl ApplicationHandler<Update> for App {
             WindowEvent::KeyboardInput { event, .. }
                 if event.state == ElementState::Pressed && !event.repeat =>
             {
-                if let Key::Character(c) = &event.logical_key
-                    && c.eq_ignore_ascii_case("b")
-                {
+                let Key::Character(c) = &event.logical_key else {
+                    return;
+                };
+                if c.eq_ignore_ascii_case("b") {
                     self.black = !self.black;
                     let black = self.black;
                     self.status.update(true, |s| s.black = black);
                     for s in &self.screens {
                         s.window.request_redraw();
+                    }
+                } else if c.eq_ignore_ascii_case("o") {
+                    self.overlay = !self.overlay;
+                    self.overlaid = Instant::now();
+                    for i in 0..self.screens.len() {
+                        self.refresh(i);
                     }
                 }
             }
@@ -319,7 +361,14 @@ impl ApplicationHandler<Update> for App {
             event_loop.exit();
             return;
         }
-        // Woken at least this often to see the stop flag; pictures wake it themselves.
+        if self.overlay && self.overlaid.elapsed() >= Duration::from_secs(1) {
+            self.overlaid = Instant::now();
+            for i in 0..self.screens.len() {
+                self.refresh(i);
+            }
+        }
+        // Woken at least this often to see the stop flag and redraw the overlay; pictures wake
+        // it themselves.
         event_loop.set_control_flow(ControlFlow::WaitUntil(
             Instant::now() + Duration::from_millis(100),
         ));

@@ -325,6 +325,20 @@ test('a test card sent to a channel is what it puts out, seen by every console',
   });
 });
 
+test('a render node that reports is listed, and its error shown', async () => {
+  await step('nodes', async () => {
+    const report = { outputs: [{ channel: 'left', showing: '"x"', frames: 1 }], fps: 1, error: 'cannot reach the daemon' };
+    const put = await fetch(`${base}/v1/nodes/wall-7`, {
+      method: 'PUT',
+      headers: { 'Content-Type': 'application/json' },
+      body: JSON.stringify(report),
+    });
+    assert.equal(put.status, 204);
+    await pageA.waitForFunction(() => /wall-7: left/.test(document.querySelector('#nodes').textContent), null, { timeout: 2000 });
+    assert.match(await pageA.textContent('#nodes [data-node=wall-7]'), /cannot reach the daemon/);
+  });
+});
+
 test('calibration from an uploaded CSV: residuals per point, applied to the rig', async () => {
   await step('calibration', async () => {
     const doc = JSON.parse(readFileSync(join(root, 'calibration/examples/points.json'), 'utf8'));

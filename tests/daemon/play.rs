@@ -305,6 +305,109 @@ fn windows_show_the_cpu_renderers_frames_bit_for_bit() {
     windows_show(&x, &args, &outputs, (1920, 1200));
 }
 
+/// Sends `key` to the window titled `title`, as the operator's keyboard would (xdotool): the
+/// window is given the focus first, and the key pressed once the window has seen that (a key
+/// that arrives with the focus is dropped).
+fn press(x: &Xvfb, title: &str, key: &str) {
+    let xdotool = |args: &[&str]| {
+        let ok = Command::new("xdotool")
+            .args(args)
+            .env("DISPLAY", &x.display)
+            .status()
+            .expect("xdotool (Debian's xdotool; ./scripts/test installs it)");
+        assert!(ok.success(), "xdotool {args:?}");
+    };
+    xdotool(&["search", "--name", title, "windowfocus", "--sync"]);
+    std::thread::sleep(Duration::from_millis(300));
+    xdotool(&["key", key]);
+}
+
+#[test]
+fn the_operator_mutes_to_black_and_puts_the_overlay_up_from_the_keyboard() {
+    let x = Xvfb::start(1920, 1080);
+    let cylinder = rig_path("cylinder-270-3proj.json");
+    let rig = Rig::read(&cylinder).unwrap();
+    let map = rig.warp(&rig.channels[0]).map;
+    let card = rgb(&testcard::draw(
+        Card::Grid,
+        &map,
+        &Label {
+            index: 0,
+            id: "left",
+        },
+    ));
+    let mut node = omniwarp()
+        .args([
+            "play",
+            "--rig",
+            cylinder.to_str().unwrap(),
+            "--show",
+            "grid",
+        ])
+        .args(["--output", "left=0,0,1920,1080"])
+        .env("DISPLAY", &x.display)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let _out = wait_shown(&mut node, &["left"]);
+    let screen = |want: &dyn Fn(&[u8]) -> Result<(), String>, what: &str| {
+        eventually(what, || want(&x.grab((0, 0), (1920, 1080))))
+    };
+    let is_card = |got: &[u8]| {
+        (got == card.as_slice())
+            .then_some(())
+            .ok_or("not the card".into())
+    };
+    screen(&is_card, "the card");
+    press(&x, "omniwarp left", "b");
+    screen(
+        &|got| {
+            got.iter()
+                .all(|&v| v == 0)
+                .then_some(())
+                .ok_or("not black".into())
+        },
+        "muted to black",
+    );
+    press(&x, "omniwarp left", "b");
+    screen(&is_card, "the card again");
+    // The overlay: a darkened box in the middle, white text in it; the corners of the box
+    // darkened to a quarter.
+    press(&x, "omniwarp left", "o");
+    screen(
+        &|got| {
+            let at = |x: usize, y: usize| (y * 1920 + x) * 3;
+            // Two corners of the box, far from the text, grid lines and black between them.
+            let corners = [(242..442, 272..322), (1478..1678, 757..807)];
+            for (xs, ys) in corners {
+                for y in ys {
+                    for x in xs.clone() {
+                        let (g, c) = (got[at(x, y)], card[at(x, y)]);
+                        if g != c / 4 {
+                            return Err(format!(
+                                "({x}, {y}) is {g}, the card's {c} / 4 is {}",
+                                c / 4
+                            ));
+                        }
+                    }
+                }
+            }
+            let white = (272..808)
+                .flat_map(|y| (242..1678).map(move |x| (x, y)))
+                .filter(|&(x, y)| got[at(x, y)..at(x, y) + 3] == [255, 255, 255])
+                .count();
+            (white > 1000)
+                .then_some(())
+                .ok_or(format!("{white} white pixels of text"))
+        },
+        "the overlay",
+    );
+    press(&x, "omniwarp left", "o");
+    screen(&is_card, "the card without the overlay");
+    terminate(node);
+}
+
 /// What the daemon lists for node `id`: per output, the ETag it shows.
 fn showing(c: &mut Client, id: &str) -> Vec<Option<String>> {
     let nodes = c.get("/v1/nodes").unwrap().json();

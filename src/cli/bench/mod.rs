@@ -19,6 +19,8 @@ pub mod methods;
 #[cfg(feature = "bench")]
 pub mod panorama;
 #[cfg(feature = "bench")]
+pub mod play;
+#[cfg(feature = "bench")]
 pub mod ppp;
 #[cfg(feature = "bench")]
 pub mod rig;
@@ -62,6 +64,10 @@ pub enum BenchCommand {
     /// view deformation, image-based against piecewise perspective, beside the seed's figures.
     #[cfg(feature = "bench")]
     Ppp(ppp::PppBenchArgs),
+    /// The render node: per output, the CPU frame, the upload and the pass that shows it, at
+    /// 1080p and 4K; the latency from a tile edit's acknowledgement to the node showing it.
+    #[cfg(feature = "bench")]
+    Play(play::PlayBenchArgs),
     /// The daemon over loopback: tile edits per second and latency with many clients, and 1080p
     /// preview latency while they edit.
     #[cfg(feature = "bench")]
@@ -111,6 +117,8 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Panorama(a) => panorama::run(a),
         #[cfg(feature = "bench")]
         BenchCommand::Ppp(a) => ppp::run(a),
+        #[cfg(feature = "bench")]
+        BenchCommand::Play(a) => play::run(a),
         #[cfg(feature = "bench")]
         BenchCommand::Serve(a) => serve::run(a),
         #[cfg(feature = "bench")]
