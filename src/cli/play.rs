@@ -131,6 +131,14 @@ fn source(a: &PlayArgs) -> Result<Source> {
 }
 
 fn daemon(a: &PlayArgs, url: &str) -> Result<Daemon> {
+    // The channels are the daemon's to check; the count is the node's own limit.
+    let most = omniwarp::limits::NODE_OUTPUTS;
+    if a.outputs.len() > most {
+        bail!(
+            "--output: at most {most} outputs on one node, got {}",
+            a.outputs.len()
+        );
+    }
     let (tls, rest) = match url.split_once("://") {
         Some(("http", r)) => (false, r),
         Some(("https", r)) => (true, r),

@@ -1,8 +1,8 @@
 //! Following a daemon: the change feed says when a channel's picture may have changed; the
 //! node then asks for the channel's `output.png` with the ETag it shows (a 304 costs nothing),
 //! decodes it on this thread and hands it to the presenting loop, which swaps it in between
-//! two frames. A fetch that fails, an answer that is not a picture of the channel's size, a
-//! daemon that is gone: each is reported and the picture shown stays. The feed is reopened
+//! two frames. A fetch that fails, an answer that is not a PNG (or one over 16384 pixels a
+//! side), a daemon that is gone: each is reported and the picture shown stays. The feed is reopened
 //! with a growing pause (a quarter second to five); it opens with a change of the rig, so every
 //! output is asked for again then, and with the first change after ten quiet seconds, in case
 //! a burst of changes overran the feed.
@@ -190,6 +190,8 @@ fn decode(bytes: &[u8]) -> Result<Raster<[u8; 4]>, String> {
     let side = crate::limits::CHANNEL_SIDE;
     limits.max_image_width = Some(side);
     limits.max_image_height = Some(side);
+    // The largest picture, RGBA8, decoded once.
+    limits.max_alloc = Some(u64::from(side) * u64::from(side) * 4);
     reader.limits(limits);
     let img = reader
         .decode()

@@ -81,20 +81,31 @@ pub fn run(
             continue;
         };
         let image = match overlaid {
-            true => overlay(
-                &p.image,
-                &output.channel,
-                &overlay_lines(&status.get(), p.output),
-            ),
+            true => {
+                let mut state = status.get();
+                state.outputs[p.output].1 = Some(p.tag.clone());
+                let lines = overlay_lines(&state, p.output);
+                overlay(&p.image, &output.channel, &lines)
+            }
             false => p.image,
         };
-        let image = match (&gpu, &mut pass) {
+        let drawn = match (&gpu, &mut pass) {
             (Some(g), Some(pass)) => {
                 let size = (image.width as u32, image.height as u32);
-                let picture = pass.upload(g, &image)?;
-                pass.render(g, &picture, false, size)?
+                pass.upload(g, &image)
+                    .and_then(|picture| pass.render(g, &picture, false, size))
             }
-            _ => image,
+            _ => Ok(image),
+        };
+        // A picture this adapter cannot take replaces nothing; the node goes on.
+        let image = match drawn {
+            Ok(image) => image,
+            Err(e) => {
+                let e = format!("{}: {e}; the picture shown stays", output.channel);
+                eprintln!("{e}");
+                status.update(true, |s| s.error = Some(e));
+                continue;
+            }
         };
         write_png(&dir.join(format!("{}.png", output.channel)), &image)?;
         shown[p.output] = true;

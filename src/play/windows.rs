@@ -204,32 +204,49 @@ impl App {
         Ok(())
     }
 
-    /// Uploads output `i`'s picture, with the overlay over it when it is on, and asks for a
-    /// redraw.
-    fn refresh(&mut self, i: usize) {
+    /// Uploads `image` (with the overlay over it when it is on) as output `i`'s picture, tagged
+    /// `tag` when it is a new one, and asks for a redraw. A picture that cannot be uploaded
+    /// (larger than this adapter takes) is reported and replaces nothing.
+    fn show(&mut self, i: usize, image: Raster<[u8; 4]>, tag: Option<String>) {
         let (Some(gpu), Some(pass)) = (&self.gpu, &self.pass) else {
             return;
         };
-        let screen = &mut self.screens[i];
-        let Some(image) = &screen.image else {
-            return;
-        };
         let uploaded = if self.overlay {
-            let lines = overlay_lines(&self.status.get(), i);
-            pass.upload(gpu, &overlay(image, &self.outputs[i].channel, &lines))
+            let mut state = self.status.get();
+            if tag.is_some() {
+                state.outputs[i].1 = tag.clone();
+            }
+            let lines = overlay_lines(&state, i);
+            pass.upload(gpu, &overlay(&image, &self.outputs[i].channel, &lines))
         } else {
-            pass.upload(gpu, image)
+            pass.upload(gpu, &image)
         };
         match uploaded {
             Ok(picture) => {
+                let screen = &mut self.screens[i];
                 screen.picture = Some(picture);
+                screen.image = Some(image);
+                if tag.is_some() {
+                    screen.tag = tag;
+                }
                 screen.window.request_redraw();
             }
             Err(e) => {
-                let e = e.to_string();
+                if tag.is_none() {
+                    // A redraw of the picture already shown: it stays the one to draw over.
+                    self.screens[i].image = Some(image);
+                }
+                let e = format!("{}: {e}; the picture shown stays", self.outputs[i].channel);
                 eprintln!("{e}");
                 self.status.update(true, |s| s.error = Some(e));
             }
+        }
+    }
+
+    /// Draws output `i`'s picture again (the overlay turned on or off, or redrawn).
+    fn refresh(&mut self, i: usize) {
+        if let Some(image) = self.screens[i].image.take() {
+            self.show(i, image, None);
         }
     }
 
@@ -299,10 +316,8 @@ impl ApplicationHandler<Update> for App {
     fn user_event(&mut self, event_loop: &ActiveEventLoop, event: Update) {
         match event {
             Update::Picture(p) => {
-                if let Some(screen) = self.screens.get_mut(p.output) {
-                    screen.image = Some(p.image);
-                    screen.tag = Some(p.tag);
-                    self.refresh(p.output);
+                if p.output < self.screens.len() {
+                    self.show(p.output, p.image, Some(p.tag));
                 }
             }
             Update::Error(e) => {

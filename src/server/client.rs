@@ -87,7 +87,8 @@ impl Client {
         }
     }
 
-    /// Sends one request; reconnects once if a kept-alive connection was closed.
+    /// Sends one request; reconnects once if a kept-alive connection was closed (an error on a
+    /// fresh connection is the answer).
     pub fn send(
         &mut self,
         method: &str,
@@ -95,13 +96,17 @@ impl Client {
         headers: &[(&str, &str)],
         body: &[u8],
     ) -> std::io::Result<Reply> {
+        let reused = self.conn.is_some();
         match self.try_send(method, path, headers, body) {
             Ok(r) => Ok(r),
-            Err(_) if self.conn.is_some() => {
+            Err(_) if reused => {
                 self.conn = None;
                 self.try_send(method, path, headers, body)
             }
-            Err(e) => Err(e),
+            Err(e) => {
+                self.conn = None;
+                Err(e)
+            }
         }
     }
 
@@ -117,6 +122,9 @@ impl Client {
         let len: usize = header(&headers, "content-length")
             .and_then(|v| v.parse().ok())
             .ok_or_else(|| bad("no Content-Length"))?;
+        if len > MAX_BODY {
+            return Err(bad("a body over 1 GiB"));
+        }
         let mut body = vec![0; len];
         conn.read_exact(&mut body)?;
         if header(&headers, "connection").is_some_and(|v| v.eq_ignore_ascii_case("close")) {
@@ -186,7 +194,7 @@ impl Client {
         stream.write_all(body)?;
         stream.flush()?;
         let mut line = String::new();
-        if conn.read_line(&mut line)? == 0 {
+        if read_line(conn, &mut line, MAX_LINE)? == 0 {
             return Err(bad("connection closed"));
         }
         let status: u16 = line
@@ -197,10 +205,13 @@ impl Client {
         let mut headers = Vec::new();
         loop {
             line.clear();
-            conn.read_line(&mut line)?;
+            read_line(conn, &mut line, MAX_LINE)?;
             let l = line.trim_end();
             if l.is_empty() {
                 break;
+            }
+            if headers.len() >= 100 {
+                return Err(bad("over 100 headers"));
             }
             if let Some((k, v)) = l.split_once(':') {
                 headers.push((k.trim().to_string(), v.trim().to_string()));
@@ -242,6 +253,21 @@ impl Client {
     }
 }
 
+/// The longest body, status or header line, and event line the client reads: a daemon's
+/// answers are far within them, and a peer that is not one cannot make it hold more.
+const MAX_BODY: usize = 1 << 30;
+const MAX_LINE: u64 = 64 << 10;
+const MAX_EVENT: u64 = 1 << 20;
+
+/// `read_line` of at most `max` bytes; a longer line is an error, not a growing buffer.
+fn read_line(r: &mut impl BufRead, line: &mut String, max: u64) -> std::io::Result<usize> {
+    let n = r.take(max).read_line(line)?;
+    if n as u64 == max && !line.ends_with('\n') {
+        return Err(bad("a line too long"));
+    }
+    Ok(n)
+}
+
 fn bad(why: &str) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, why.to_string())
 }
@@ -273,7 +299,7 @@ impl Read for Dechunk {
         }
         if self.left == 0 {
             let mut line = String::new();
-            if self.conn.read_line(&mut line)? == 0 {
+            if read_line(&mut self.conn, &mut line, MAX_LINE)? == 0 {
                 self.done = true;
                 return Ok(0);
             }
@@ -312,7 +338,7 @@ impl Feed {
         let mut line = String::new();
         loop {
             line.clear();
-            if self.body.read_line(&mut line)? == 0 {
+            if read_line(&mut self.body, &mut line, MAX_EVENT)? == 0 {
                 return Ok(None);
             }
             let l = line.trim_end_matches(['\r', '\n']);
@@ -333,5 +359,46 @@ impl Feed {
                 return Err(bad("an event over 1 MiB"));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Client;
+    use std::io::{Read, Write};
+    use std::time::Duration;
+
+    /// A server that answers the first request on its port with `answer`.
+    fn answering(answer: Vec<u8>) -> std::net::SocketAddr {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        std::thread::spawn(move || {
+            let (mut conn, _) = listener.accept().unwrap();
+            let mut request = [0; 1024];
+            let _ = conn.read(&mut request);
+            let _ = conn.write_all(&answer);
+            std::thread::sleep(Duration::from_millis(200));
+        });
+        addr
+    }
+
+    #[test]
+    fn a_peer_that_is_not_the_daemon_cannot_make_the_client_panic_or_grow() {
+        let huge = b"HTTP/1.1 200 OK\r\nContent-Length: 18446744073709551615\r\n\r\n".to_vec();
+        let e = Client::new(answering(huge), None).get("/").unwrap_err();
+        assert!(e.to_string().contains("over 1 GiB"), "{e}");
+        let mut endless = b"HTTP/1.1 200 OK\r\nX-Long: ".to_vec();
+        endless.extend(std::iter::repeat_n(b'a', 100 << 10));
+        let e = Client::new(answering(endless), None).get("/").unwrap_err();
+        assert!(e.to_string().contains("too long"), "{e}");
+        let mut event = b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n".to_vec();
+        let line = format!("data: {}", "x".repeat(2 << 20));
+        event.extend(format!("{:x}\r\n{line}\r\n", line.len()).into_bytes());
+        let (status, mut feed) = Client::new(answering(event), None)
+            .feed("/v1/events", Duration::from_secs(5))
+            .unwrap();
+        assert_eq!(status, 200);
+        let e = feed.event().unwrap_err();
+        assert!(e.to_string().contains("too long"), "{e}");
     }
 }

@@ -493,7 +493,7 @@ fn a_headless_node_follows_the_daemon_through_edits_and_a_restart() {
         showing(&mut c, "wall-1")[0]
             .as_deref()
             .unwrap()
-            .contains("show-2")
+            .contains("card-grid")
     );
     let edit = |c: &mut Client, revision: u64| {
         let body = serde_json::json!({"edits": [
@@ -743,8 +743,11 @@ async fn nodes_report_and_are_listed_within_their_limits() {
     let (st, _, _) = call(&s, write("PUT", "/v1/nodes/wall-1", None, report(2))).await;
     assert_eq!(st, StatusCode::NO_CONTENT);
     assert!(feed.try_recv().unwrap().contains(r#""node":"wall-1""#));
-    // The same report again changes nothing the feed needs to hear about.
-    call(&s, write("PUT", "/v1/nodes/wall-1", None, report(2))).await;
+    // The same pictures again, only more frames presented at another rate: nothing the feed
+    // needs to hear about (a node reports every second).
+    let later = report(2).replace(r#""frames":3"#, r#""frames":90"#);
+    assert!(later.contains("90"));
+    call(&s, write("PUT", "/v1/nodes/wall-1", None, later)).await;
     assert!(feed.try_recv().is_err());
     let (_, _, body) = call(&s, get("/v1/nodes")).await;
     let listed = &json(&body)["nodes"][0];
@@ -797,4 +800,32 @@ async fn nodes_report_and_are_listed_within_their_limits() {
     assert_eq!(st, StatusCode::NOT_FOUND);
     let (st, _, _) = call(&s, write("PUT", "/v1/nodes/late", None, report(1))).await;
     assert_eq!(st, StatusCode::NO_CONTENT);
+}
+
+#[tokio::test]
+async fn a_feed_that_falls_behind_is_told_so() {
+    use http_body_util::BodyExt;
+    use tower::ServiceExt;
+    let s = common::server::state(None, None);
+    let response = omniwarp::server::router(s.clone())
+        .oneshot(common::server::get("/v1/events"))
+        .await
+        .unwrap();
+    // More changes than the feed keeps, before the subscriber reads any.
+    for k in 0..400 {
+        s.announce(serde_json::json!({"kind": "tiles", "channel": "left", "revision": k}));
+    }
+    let mut body = response.into_body();
+    let mut seen = String::new();
+    while !seen.contains("lagged") {
+        let frame = tokio::time::timeout(Duration::from_secs(5), body.frame())
+            .await
+            .expect("the feed went quiet before saying it fell behind")
+            .unwrap()
+            .unwrap();
+        if let Ok(data) = frame.into_data() {
+            seen.push_str(&String::from_utf8_lossy(&data));
+        }
+    }
+    assert!(seen.contains(r#""kind":"lagged","missed":144"#), "{seen}");
 }

@@ -80,7 +80,8 @@ impl Nodes {
             }
         }
         let before = nodes.insert(id.to_string(), (now, report.clone()));
-        Ok(before.is_none_or(|(_, b)| b.outputs != report.outputs || b.black != report.black))
+        // Frames and rates change every report; the feed hears of what is on the wall.
+        Ok(before.is_none_or(|(_, b)| !same_shown(&b, &report)))
     }
 
     /// Every node, as it reported, with its `id` and the `age_seconds` since.
@@ -102,6 +103,17 @@ impl Nodes {
     pub fn forget(&self, id: &str) -> bool {
         self.0.lock().expect("nodes lock").remove(id).is_some()
     }
+}
+
+/// Whether two reports say the same is on the wall: the same pictures on the same channels,
+/// muted alike.
+fn same_shown(a: &Report, b: &Report) -> bool {
+    a.black == b.black
+        && a.outputs.len() == b.outputs.len()
+        && a.outputs
+            .iter()
+            .zip(&b.outputs)
+            .all(|(x, y)| x.channel == y.channel && x.showing == y.showing)
 }
 
 fn check(id: &str, r: &Report) -> Result<(), ApiError> {

@@ -18,6 +18,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
+use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
 
 pub async fn health(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
     Json(serde_json::json!({
@@ -147,9 +148,14 @@ pub async fn events(
     let (_, now) = s.store.snapshot();
     let first = serde_json::json!({"kind": "rig", "revision": now}).to_string();
     let first = tokio_stream::once(Ok(Event::default().event("change").data(first)));
-    let rest = BroadcastStream::new(s.events.subscribe())
-        .filter_map(|r| r.ok())
-        .map(|c| Ok(Event::default().event("change").data(c)));
+    // A subscriber too slow for the changes is told it missed some, so that it reads again
+    // whatever it holds (the render nodes refetch every picture).
+    let rest = BroadcastStream::new(s.events.subscribe()).map(|r| {
+        let data = r.unwrap_or_else(|BroadcastStreamRecvError::Lagged(n)| {
+            serde_json::json!({"kind": "lagged", "missed": n}).to_string()
+        });
+        Ok(Event::default().event("change").data(data))
+    });
     let mut stopping = s.stopping.subscribe();
     // The feed's place is held as long as its stream, which ends with the connection.
     let stop = async move {

@@ -170,7 +170,7 @@ pub async fn output(
 ) -> Result<Response, ApiError> {
     let index = index_of(&s, &id)?;
     let scale = q.scale.unwrap_or(1);
-    let (revision, shown) = s.shows.get(&id);
+    let (_, shown) = s.shows.get(&id);
     let card = match shown {
         Shown::Card(card) => card,
         Shown::Content => {
@@ -198,8 +198,10 @@ pub async fn output(
             }
             let set = sequence(&s, &id, period, code.as_deref())?;
             let f = set.frame(frame, "frame")?;
+            // Named by what it draws (as the pattern route names it): the same tag is the same
+            // picture, before and after a restart.
             let etag = format!(
-                "\"show-{revision}-pattern-{}x{}-p{}-{}-{frame}\"",
+                "\"pattern-{}x{}-p{}-{}-{frame}\"",
                 set.width,
                 set.height,
                 set.period,
@@ -220,7 +222,13 @@ pub async fn output(
     }
     let j = job(&s, &id).await?;
     let computed = j.computed.clone();
-    let etag = format!("\"show-{revision}-{}\"", j.etag().trim_matches('"'));
+    // Named by what it draws: the card, the scale and the warp (the crosshatch follows it), so
+    // a 304 is never a different card, even after a restart resets the shows' revisions.
+    let etag = format!(
+        "\"card-{}-s{scale}-{}\"",
+        card.name(),
+        j.etag().trim_matches('"')
+    );
     if let Some(r) = unchanged(&headers, &etag) {
         return Ok(r);
     }
