@@ -3,7 +3,7 @@
 //! a rig file (`--rig` with `--content` or `--show`). See `src/play/` and docs/player.md.
 
 use crate::cli::args::{ContentArgs, flag_error};
-use crate::cli::io::{AnyContent, channel, load_content, read_rig, render_inputs};
+use crate::cli::io::{AnyContent, channel, load_content, read_rig, signal_mask};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::content::testcard::{self, Card, Label};
@@ -214,7 +214,9 @@ fn pictures(a: &PlayArgs) -> Result<Vec<Picture>> {
     for (i, o) in a.outputs.iter().enumerate() {
         let ch = channel(&rig, &o.channel)?;
         let index = ids.iter().position(|c| *c == o.channel).unwrap_or(0);
-        let (map, gains) = render_inputs(path, &o.channel, a.gamma, None)?;
+        let warp = rig.warp(ch);
+        let gains = signal_mask(&rig, ch, &warp.points, a.gamma)?;
+        let map = warp.map;
         let image = match &what {
             What::Card(card) => testcard::draw(
                 *card,

@@ -6,6 +6,7 @@ use super::pass::{entry, output, texture, uniform};
 use super::{Gpu, SHOW_WGSL, read_rgba8};
 use crate::error::{Error, Result};
 use crate::raster::Raster;
+use wgpu::util::DeviceExt;
 
 /// The pass: one bind-group layout, a pipeline per target format (a window's surface is
 /// usually BGRA, a headless target RGBA).
@@ -60,35 +61,24 @@ impl ShowPass {
                 format!("must be 1–{max} pixels each way on this adapter, got {w}×{h}"),
             ));
         }
-        let size = wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        };
-        let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("picture"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba8Unorm,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        gpu.queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
+        let texture = gpu.device.create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("picture"),
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
             },
+            wgpu::util::TextureDataOrder::LayerMajor,
             bytemuck::cast_slice(&img.data),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(w * 4),
-                rows_per_image: Some(h),
-            },
-            size,
         );
         let uniform = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("show"),

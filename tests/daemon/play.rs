@@ -182,6 +182,13 @@ fn windows_show(
     for (channel, at, expected) in outputs {
         eventually(&format!("window {channel}"), || {
             let got = x.grab(*at, size);
+            if got.len() != expected.len() {
+                return Err(format!(
+                    "grabbed {} values, the CPU frame has {}",
+                    got.len(),
+                    expected.len()
+                ));
+            }
             let wrong = got.iter().zip(expected).filter(|(a, b)| a != b).count();
             if wrong == 0 {
                 Ok(())

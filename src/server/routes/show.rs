@@ -198,15 +198,7 @@ pub async fn output(
             }
             let set = sequence(&s, &id, period, code.as_deref())?;
             let f = set.frame(frame, "frame")?;
-            // Named by what it draws (as the pattern route names it): the same tag is the same
-            // picture, before and after a restart.
-            let etag = format!(
-                "\"pattern-{}x{}-p{}-{}-{frame}\"",
-                set.width,
-                set.height,
-                set.period,
-                set.code.name()
-            );
+            let etag = pattern_etag(&set, frame);
             if let Some(r) = unchanged(&headers, &etag) {
                 return Ok(r);
             }
@@ -242,6 +234,18 @@ pub async fn output(
     outputs::file(&s, png, "image/png", &etag)
 }
 
+/// The tag of frame `n` of a pattern sequence, named by what it draws, so the same tag is the
+/// same picture before and after a restart (the pattern route and a pattern show answer with it).
+fn pattern_etag(set: &PatternSet, n: usize) -> String {
+    format!(
+        "\"pattern-{}x{}-p{}-{}-{n}\"",
+        set.width,
+        set.height,
+        set.period,
+        set.code.name()
+    )
+}
+
 /// Frame `n` of the channel's structured-light sequence (`src/structured/mod.rs`), an 8-bit
 /// grey PNG at the channel's resolution: what a media server or the console puts on the
 /// projector while a camera captures it for `omniwarp calibrate --captures`.
@@ -269,13 +273,7 @@ pub async fn pattern(
     let set = super::captures::sequence(&s, &id, named)?;
     let n = super::captures::frame_number(&n, &set)?;
     let frame = set.frame(n, "n")?;
-    let etag = format!(
-        "\"pattern-{}x{}-p{}-{}-{n}\"",
-        set.width,
-        set.height,
-        set.period,
-        set.code.name()
-    );
+    let etag = pattern_etag(&set, n);
     let png = run_job(&s, move |_| Ok(set.image(frame).png()?)).await?;
     outputs::file(&s, png, "image/png", &etag)
 }
