@@ -2,10 +2,16 @@
 //! Gaia Sky and Blender's dome mode read it: line 1 the type, line 2 `nx ny`, then nx·ny nodes
 //! `x y u v i`, bottom row first. x ∈ [−aspect, aspect] and y ∈ [−1, 1] place the node on the
 //! projector image (edges included, y up); u, v ∈ [0, 1] point into the content image with v = 0
-//! at its bottom (OpenGL texture coordinates); i is the node's intensity (the blend weight),
-//! negative where the node is not drawn.
+//! at its bottom (OpenGL texture coordinates); i is the node's intensity.
+//!
+//! What readers accept and do, as their code shows (Celestia's `warpmesh.cpp` since July 2025,
+//! SGCT's `paulbourke.cpp`): u, v and i must lie in [0, 1] (Celestia refuses the whole mesh
+//! otherwise, so a node with no content is `0 0 0`, not the negative intensity older players
+//! skipped), x and y must form a monotonic grid, and i multiplies the colour as displayed —
+//! gamma-encoded — so a linear blend weight w is written as w^(1/2.2), the projector gamma the
+//! MPCDI alpha maps embed too.
 
-use super::grid::{Cells, Grid};
+use super::grid::{Cells, Grid, Shape};
 use crate::error::{Error, Result};
 
 /// The reader a mesh's grid is sized for: each draws a cell as two triangles, split along a
@@ -56,6 +62,15 @@ impl MeshReader {
             })
     }
 
+    /// Which grids this reader draws whole: Celestia only square ones of at most 1,024 nodes a
+    /// side (see [`Shape::Square`]), so a mesh for it, or for any reader, is square.
+    pub fn shape(self) -> Shape {
+        match self {
+            MeshReader::Any | MeshReader::Celestia => Shape::Square { max: 1024 },
+            MeshReader::Bilinear | MeshReader::Sgct => Shape::Free,
+        }
+    }
+
     /// How this reader fills a cell between its four nodes, which the grid is sized for.
     pub fn cells(self) -> Cells {
         match self {
@@ -81,10 +96,14 @@ pub struct Mesh {
     pub nodes: Vec<[f64; 5]>,
 }
 
-/// The mesh text for a grid of content (u, v) (top-left origin) and the intensity
-/// at each node; `aspect` is the projector's width / height.
-pub fn mesh_text(uv: &Grid<2>, intensity: &[f64], aspect: f64) -> Result<String> {
-    if intensity.len() != uv.samples.len() {
+/// The projector gamma a linear blend weight is encoded with to become a node's intensity.
+pub const INTENSITY_GAMMA: f64 = 2.2;
+
+/// The mesh text for a grid of content (u, v) (top-left origin) and the linear blend weight at
+/// each node; `aspect` is the projector's width / height. Coordinates past the content's edges
+/// are clamped to them (the format has no others), and nodes with no content are black.
+pub fn mesh_text(uv: &Grid<2>, weights: &[f64], aspect: f64) -> Result<String> {
+    if weights.len() != uv.samples.len() {
         return Err(Error::invalid("mesh", "one intensity per node is needed"));
     }
     let (nx, ny) = (uv.columns, uv.rows);
@@ -96,8 +115,12 @@ pub fn mesh_text(uv: &Grid<2>, intensity: &[f64], aspect: f64) -> Result<String>
             let x = aspect * (2.0 * col as f64 / (nx - 1) as f64 - 1.0);
             let n = row * nx + col;
             let (u, v, i) = match uv.samples[n] {
-                Some([u, v]) => (u, 1.0 - v, intensity[n].clamp(0.0, 1.0)),
-                None => (0.0, 0.0, -1.0),
+                Some([u, v]) if u.is_finite() && v.is_finite() => (
+                    u.clamp(0.0, 1.0),
+                    (1.0 - v).clamp(0.0, 1.0),
+                    weights[n].clamp(0.0, 1.0).powf(1.0 / INTENSITY_GAMMA),
+                ),
+                _ => (0.0, 0.0, 0.0),
             };
             let _ = writeln!(out, "{x:.6} {y:.6} {u:.8} {v:.8} {i:.6}");
         }

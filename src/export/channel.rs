@@ -258,7 +258,8 @@ impl Sources<'_> {
     }
 
     /// Paul Bourke mesh text with its grid, sized for how `reader` fills a cell (every reader
-    /// of this format draws triangles; which diagonal varies), intensity = blend weight.
+    /// of this format draws triangles; which diagonal varies) and shaped as it draws grids;
+    /// intensity from the blend weight ([`bourke::mesh_text`]).
     /// Readers interpolate the
     /// intensity across each cell, so a node just off the wall, which a cell reaching the wall
     /// draws, takes the weight of the lit pixel nearest it (within a cell) rather than the 0 of
@@ -268,6 +269,7 @@ impl Sources<'_> {
         let reading = Reading {
             layout: Layout::Edges,
             cells: reader.cells(),
+            shape: reader.shape(),
         };
         let c = self.choose_2d(self.uv, self.uv_scale(), reading, tol)?;
         let (w, h) = (self.width, self.height);

@@ -66,13 +66,30 @@ pub enum Cells {
     Any,
 }
 
-/// How a reader reads a grid: where it places the nodes and how it fills the cells.
+/// Which grids a reader can draw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shape {
+    /// Any: rows follow the image's aspect ratio.
+    Free,
+    /// As many rows as columns, at most `max` nodes a side. Celestia draws a mesh's cells with
+    /// the column count for both loops (`setIndices` in `warpmesh.cpp`): only a square grid is
+    /// drawn whole and in bounds. Its loader refuses more than 1,024 nodes a side.
+    Square {
+        /// Most nodes a side.
+        max: usize,
+    },
+}
+
+/// How a reader reads a grid: where it places the nodes, how it fills the cells and which
+/// grids it can draw.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Reading {
     /// Where the reader places the nodes on the image.
     pub layout: Layout,
     /// How the reader fills a cell between four nodes.
     pub cells: Cells,
+    /// Which grids the reader can draw.
+    pub shape: Shape,
 }
 
 impl Reading {
@@ -80,6 +97,7 @@ impl Reading {
     pub const BILINEAR: Reading = Reading {
         layout: Layout::Edges,
         cells: Cells::Bilinear,
+        shape: Shape::Free,
     };
 }
 
@@ -376,11 +394,18 @@ pub fn choose<const N: usize>(
         let max_error = grid.max_error(field, width, height, scale);
         Chosen { grid, max_error }
     };
+    let square = match reading.shape {
+        Shape::Square { max } => Some(max.max(2)),
+        Shape::Free => None,
+    };
     let mut columns = 2usize;
     let mut finest: Option<Grid<N>> = None;
-    while columns < width {
-        let rows = ((columns as f64 * height as f64 / width as f64).round() as usize).max(2);
-        if !fits(columns, rows) {
+    while columns < square.map_or(width, |_| width.max(height)) {
+        let rows = match square {
+            Some(_) => columns,
+            None => ((columns as f64 * height as f64 / width as f64).round() as usize).max(2),
+        };
+        if !fits(columns, rows) || square.is_some_and(|max| columns > max) {
             break;
         }
         cancelled()?;
@@ -391,7 +416,16 @@ pub fn choose<const N: usize>(
         finest = Some(grid);
         columns = ((columns as f64 * std::f64::consts::SQRT_2).ceil() as usize).max(columns + 1);
     }
-    let (columns, rows) = reading.layout.exact(width, height);
+    let (columns, rows) = match square {
+        // The finest square the reader and the node limit allow, no finer than exact.
+        Some(max) => {
+            let (c, r) = reading.layout.exact(width, height);
+            let limit = (crate::limits::EXPORT_NODES as f64).sqrt() as usize;
+            let n = c.max(r).min(max).min(limit);
+            (n, n)
+        }
+        None => reading.layout.exact(width, height),
+    };
     cancelled()?;
     Ok(match finest {
         Some(g) if !fits(columns, rows) => measured(g),
@@ -471,12 +505,21 @@ mod tests {
             .map(|cells| Reading {
                 layout: Layout::Edges,
                 cells,
+                shape: Shape::Free,
             })
             .into_iter()
-            .chain([Reading {
-                layout: Layout::Centres,
-                cells: Cells::Bilinear,
-            }]);
+            .chain([
+                Reading {
+                    layout: Layout::Centres,
+                    cells: Cells::Bilinear,
+                    shape: Shape::Free,
+                },
+                Reading {
+                    layout: Layout::Edges,
+                    cells: Cells::TopLeftDiagonal,
+                    shape: Shape::Square { max: 1024 },
+                },
+            ]);
         let mut coarsest = Vec::new();
         for reading in readings {
             let layout = reading.layout;
@@ -486,6 +529,10 @@ mod tests {
                 let c = choose(&f, w, h, tol, [1.0, 1.0], reading, &never).unwrap();
                 assert_eq!(c.grid.reading, reading);
                 assert!(c.max_error <= tol, "{tol}: {}", c.max_error);
+                if let Shape::Square { max } = reading.shape {
+                    let g = &c.grid;
+                    assert!(g.columns == g.rows && g.columns <= max, "{reading:?}");
+                }
                 let mut worst = 0.0f64;
                 let ways: &[Cells] = match reading.cells {
                     Cells::Any => &cells[..3],
@@ -523,6 +570,37 @@ mod tests {
             coarsest[3] >= coarsest[..3].iter().copied().max().unwrap(),
             "{coarsest:?}"
         );
+    }
+
+    #[test]
+    fn a_square_reader_gets_square_grids_no_larger_than_it_draws() {
+        let (w, h) = (160, 90);
+        let f = field(w, h);
+        let never = AtomicBool::new(false);
+        let reading = Reading {
+            layout: Layout::Edges,
+            cells: Cells::TopLeftDiagonal,
+            shape: Shape::Square { max: 12 },
+        };
+        // A tolerance no 12 × 12 grid meets: the finest square allowed, with its error.
+        let c = choose(&f, w, h, 1e-6, [1.0, 1.0], reading, &never).unwrap();
+        assert_eq!((c.grid.columns, c.grid.rows), (12, 12));
+        assert!(c.max_error > 1e-6);
+        // Where the cap is not reached, the grid is square as well.
+        let c = choose(
+            &f,
+            w,
+            h,
+            0.3,
+            [1.0, 1.0],
+            Reading {
+                shape: Shape::Square { max: 1024 },
+                ..reading
+            },
+            &never,
+        )
+        .unwrap();
+        assert_eq!(c.grid.columns, c.grid.rows);
     }
 
     /// The tolerance search stops measuring a grid once it fails; what it reports and chooses

@@ -15,7 +15,7 @@
 //! `Xresolution`, `Yresolution`, `xsize`, `ysize`, `originof3DData`, and `level` is written in
 //! v2.0 files too. The reader here accepts any letter case.
 
-use super::grid::{Cells, Layout, Reading};
+use super::grid::{Cells, Layout, Reading, Shape};
 use crate::error::{Error, Result};
 use std::io::{Cursor, Read, Write};
 
@@ -141,10 +141,12 @@ impl Reader {
             Reader::Pympcdi => Reading {
                 layout: Layout::Centres,
                 cells: Cells::Bilinear,
+                shape: Shape::Free,
             },
             Reader::Ndisplay | Reader::Watchout | Reader::Sgct => Reading {
                 layout: Layout::Edges,
                 cells: Cells::Any,
+                shape: Shape::Free,
             },
         }
     }

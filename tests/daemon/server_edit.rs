@@ -1380,6 +1380,92 @@ async fn bourke_meshes_give_lit_pixels_their_weight_at_the_wall_edge() {
     assert!(dark * 20 < lit, "{dark} of {lit} lit pixels darkened");
 }
 
+/// Issue 47, item 5: a Bourke mesh as current Celestia reads and shades it. The loader refuses
+/// any u, v or i outside [0, 1] (the −1 of undrawn nodes made it refuse the whole mesh), draws
+/// only square grids whole, and its fragment shader multiplies the displayed colour by the
+/// interpolated intensity: with the linear weight written there a 50/50 overlap showed
+/// 2 · 0.5^2.2 ≈ 0.44 of full light. Shaded that way, the mesh must give our blended picture:
+/// content at the exact warp times the blend gain w^(1/2.2), as `render` makes it.
+#[tokio::test]
+async fn bourke_meshes_load_in_celestia_and_shade_to_our_blended_picture() {
+    let demo = demo_state();
+    let (_, _, body) = call(&demo, get("/v1/channels/centre/content")).await;
+    let canvas: omniwarp::server::Canvas =
+        serde_json::from_value(json(&body)["content"].clone()).unwrap();
+    let view = canvas.view().unwrap();
+    let [cw, ch] = canvas.size.map(f64::from);
+    // Content with detail at every scale a tolerance of half a content pixel could blur: a
+    // colour ramp with stripes 40 content pixels apart.
+    let content = |u: f64, v: f64| {
+        let s = 0.5 + 0.5 * (std::f64::consts::TAU * (u * cw + v * ch) / 40.0).sin();
+        [u, v, s].map(|c| c.clamp(0.0, 1.0))
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for id in ["left", "centre"] {
+        let (_, _, exr) = call(&demo, get(&format!("/v1/channels/{id}/warp.exr"))).await;
+        std::fs::write(dir.path().join("w.exr"), &exr).unwrap();
+        let warp = omniwarp::normalmap::NormalMap::read(&dir.path().join("w.exr")).unwrap();
+        let size = [warp.width(), warp.height()];
+        let exact = omniwarp::export::content_uv(&warp, &view);
+        let (_, _, png) = call(&demo, get(&format!("/v1/channels/{id}/blend.png?gamma=1"))).await;
+        let blend = image::load_from_memory(&png).unwrap().into_luma16();
+        let ours = |i: usize, j: usize| {
+            let w = f64::from(blend.get_pixel(i as u32, j as u32)[0]) / 65535.0;
+            exact[j * size[0] + i].map_or([0.0; 3], |[u, v]| {
+                content(u, v).map(|c| c * w.powf(1.0 / 2.2))
+            })
+        };
+        for query in ["", "&reader=celestia"] {
+            let (st, _, body) = call(
+                &demo,
+                get(&format!(
+                    "/v1/channels/{id}/exports/mesh.data?tolerance=0.5{query}"
+                )),
+            )
+            .await;
+            assert_eq!(st, StatusCode::OK);
+            let mesh = celestia_load(std::str::from_utf8(&body).unwrap())
+                .unwrap_or_else(|e| panic!("{id}{query}: Celestia refuses the mesh: {e}"));
+            // PSNR, 8-bit scale, of the picture Celestia shades (intensity as written, or as
+            // linear weights were written before) against ours, over the projector's pixels
+            // that reach the wall. Past the wall's edge the cells that cross it spill light
+            // (their outer nodes hold the edge's weight, see the test above); no mesh can end
+            // light inside a cell.
+            let psnr = |encode: &dyn Fn(f64) -> f64| {
+                let (mut squared, mut count) = (0.0, 0usize);
+                for j in 0..size[1] {
+                    for i in 0..size[0] {
+                        if warp.direction(i, j).is_none() {
+                            continue;
+                        }
+                        count += 1;
+                        let shown = triangle_shader(&mesh, "celestia", size, i, j)
+                            .map_or([0.0; 3], |[u, v, k]| content(u, v).map(|c| c * encode(k)));
+                        let want = ours(i, j);
+                        for c in 0..3 {
+                            squared += (255.0 * (shown[c] - want[c])).powi(2);
+                        }
+                    }
+                }
+                let mse = squared / (3 * count) as f64;
+                10.0 * (255.0f64.powi(2) / mse).log10()
+            };
+            let as_written = psnr(&|k| k);
+            let as_linear = psnr(&|k| k.powf(2.2));
+            eprintln!(
+                "{id}{query}: {}×{} mesh, {as_written:.1} dB as Celestia shades it, \
+                 {as_linear:.1} dB had the weights been written linear",
+                mesh.nx, mesh.ny
+            );
+            assert!(as_written >= 40.0, "{id}{query}: {as_written:.1} dB");
+            assert!(
+                as_linear < 35.0,
+                "{id}{query}: the overlap test sees no blend"
+            );
+        }
+    }
+}
+
 /// Bilinear between nodes placed edge to edge (node i at i / (n − 1)), as the 2d PFM, Bourke and
 /// VESA readers interpolate; `None` where a weighted node is unknown.
 fn edge_to_edge(
@@ -1419,6 +1505,18 @@ fn triangle_reader(
     i: usize,
     j: usize,
 ) -> Option<[f64; 2]> {
+    triangle_shader(mesh, reader, size, i, j).map(|[u, v, _]| [u, v])
+}
+
+/// As [`triangle_reader`], with the node intensity the triangle interpolates as a third value:
+/// what the reader's fragment shader multiplies the content's colour by.
+fn triangle_shader(
+    mesh: &bourke::Mesh,
+    reader: &str,
+    size: [usize; 2],
+    i: usize,
+    j: usize,
+) -> Option<[f64; 3]> {
     let aspect = size[0] as f64 / size[1] as f64;
     let x = ((i as f64 + 0.5) / size[0] as f64 * 2.0 - 1.0) * aspect;
     let y = 1.0 - (j as f64 + 0.5) / size[1] as f64 * 2.0;
@@ -1429,7 +1527,7 @@ fn triangle_reader(
     let (fx, fy) = (loc_x - cx as f64, loc_y - cy as f64);
     let node = |c: usize, r: usize| {
         let n = mesh.nodes[r * nx + c];
-        (n[4] >= 0.0).then_some([n[2], n[3]])
+        (n[4] >= 0.0).then_some([n[2], n[3], n[4]])
     };
     let (p1, p2, p3, p4) = (
         node(cx, cy),
@@ -1437,25 +1535,85 @@ fn triangle_reader(
         node(cx, cy + 1),
         node(cx + 1, cy + 1),
     );
-    let mix = |a: [f64; 2], s: f64, b: [f64; 2], t: f64, c: [f64; 2]| {
-        [0, 1].map(|k| a[k] + s * (b[k] - a[k]) + t * (c[k] - a[k]))
+    let mix = |a: [f64; 3], s: f64, b: [f64; 3], t: f64, c: [f64; 3]| {
+        [0, 1, 2].map(|k| a[k] + s * (b[k] - a[k]) + t * (c[k] - a[k]))
     };
-    let [u, v] = match reader {
+    let [u, v, intensity] = match reader {
         // Celestia: p1 p2 p3 below the diagonal p2–p3, else p4 p3 p2.
         "celestia" if fx + fy <= 1.0 => mix(p1?, fx, p2?, fy, p3?),
         "celestia" => mix(p4?, 1.0 - fx, p3?, 1.0 - fy, p2?),
         // SGCT: triangles (i0, i1, i2) and (i0, i2, i3) around the diagonal i0–i2.
         "sgct" if fx >= fy => {
             let (a, b, c) = (p1?, p2?, p4?);
-            [0, 1].map(|k| a[k] + fx * (b[k] - a[k]) + fy * (c[k] - b[k]))
+            [0, 1, 2].map(|k| a[k] + fx * (b[k] - a[k]) + fy * (c[k] - b[k]))
         }
         "sgct" => {
             let (a, d, c) = (p1?, p3?, p4?);
-            [0, 1].map(|k| a[k] + fy * (d[k] - a[k]) + fx * (c[k] - d[k]))
+            [0, 1, 2].map(|k| a[k] + fy * (d[k] - a[k]) + fx * (c[k] - d[k]))
         }
         other => panic!("{other}"),
     };
-    Some([u, 1.0 - v])
+    Some([u, 1.0 - v, intensity])
+}
+
+/// Celestia's mesh loader (`WarpMesh::load` and `readVertex` in its `warpmesh.cpp`, from the
+/// master of August 2026) and its index list (`setIndices`): the reasons it refuses a mesh or
+/// draws it wrong, or the mesh.
+fn celestia_load(text: &str) -> Result<bourke::Mesh, String> {
+    let mut words = text.split_whitespace();
+    let mut next = |what: &str| -> Result<f64, String> {
+        words
+            .next()
+            .and_then(|w| w.parse::<f32>().ok())
+            .map(f64::from)
+            .ok_or_else(|| format!("Failed to read {what}"))
+    };
+    let kind = next("mesh header")?;
+    if kind != 2.0 {
+        return Err(format!("Unsupported mesh type found: {kind}"));
+    }
+    let (nx, ny) = (next("mesh header")? as usize, next("mesh header")? as usize);
+    if nx < 2 || ny < 2 || nx > 1024 || ny > 1024 {
+        return Err(format!("{nx} × {ny}: rows and columns must be 2 to 1024"));
+    }
+    let mut nodes: Vec<[f64; 5]> = Vec::with_capacity(nx * ny);
+    for n in 0..nx * ny {
+        let mut v = [0.0; 5];
+        for k in &mut v {
+            *k = next("mesh data")?;
+        }
+        if !(0.0..=1.0).contains(&v[2])
+            || !(0.0..=1.0).contains(&v[3])
+            || !(0.0..=1.0).contains(&v[4])
+        {
+            return Err(format!(
+                "node {n} {v:?}: Missing vertices are not supported"
+            ));
+        }
+        let (x, y) = (n % nx, n / nx);
+        if (x > 0 && (nodes[n - 1][0] >= v[0] || nodes[n - 1][1] != v[1]))
+            || (y > 0 && (nodes[n - nx][0] != v[0] || nodes[n - nx][1] >= v[1]))
+        {
+            return Err(format!(
+                "node {n}: Only monotonic grid warp meshes are supported"
+            ));
+        }
+        nodes.push(v);
+    }
+    // setIndices runs its row loop to nx − 1, not ny − 1.
+    if nx != ny {
+        return Err(format!(
+            "{nx} × {ny}: setIndices draws {} rows of cells for {} (out of bounds or missing)",
+            nx - 1,
+            ny - 1
+        ));
+    }
+    Ok(bourke::Mesh {
+        kind: 2,
+        nx,
+        ny,
+        nodes,
+    })
 }
 
 /// Issue 20, item 5: a tolerance is a promise. Read back as their readers interpolate them, the
