@@ -15,6 +15,15 @@ export class ApiError extends Error {
   }
 }
 
+// The daemon could not be reached at all (stopped, restarting, the network down): nothing
+// was done. Said as such, not as the browser's "Failed to fetch".
+export class Unreachable extends Error {
+  constructor(method) {
+    super(method === 'GET' ? 'the daemon cannot be reached' : 'not saved: the daemon cannot be reached');
+    this.write = method !== 'GET';
+  }
+}
+
 export function revisionOf(etag) {
   const m = /^(?:W\/)?"(\d+)"$/.exec(etag || '');
   return m ? Number(m[1]) : null;
@@ -28,6 +37,8 @@ export class Api {
   constructor(token = '') {
     this.token = token;
     this.onBusy = () => {};
+    // Writes that never reached the daemon, since the console last said so.
+    this.lostWrites = 0;
   }
 
   headers(extra = {}) {
@@ -45,12 +56,17 @@ export class Api {
     // nothing was done then, so asking again is safe for every route.
     let resp;
     for (let attempt = 0; ; attempt++) {
-      resp = await fetch(path, {
-        method,
-        headers,
-        body: body === undefined ? undefined : JSON.stringify(body),
-        cache: 'no-store',
-      });
+      try {
+        resp = await fetch(path, {
+          method,
+          headers,
+          body: body === undefined ? undefined : JSON.stringify(body),
+          cache: 'no-store',
+        });
+      } catch {
+        if (method !== 'GET') this.lostWrites++;
+        throw new Unreachable(method);
+      }
       if (resp.status !== 503 || attempt >= BUSY_RETRIES) {
         if (attempt > 0) this.onBusy(null);
         break;

@@ -1,7 +1,7 @@
 // The console's entry: holds the token, the rig's revision and the selected channel, follows
 // the change feed and routes each change to what it affects.
 
-import { Api, ApiError } from './api.js';
+import { Api, ApiError, Unreachable } from './api.js';
 import { ChannelView } from './channel.js';
 import { CalibrationPanel, ContentPanel, ExportPanel, HistoryPanel, NodesPanel, PatternPanel } from './panels.js';
 import { RigView } from './rig3d.js';
@@ -94,6 +94,7 @@ class App {
 
   describe(e) {
     if (e instanceof ApiError) return `${e.status} ${e.describe()}`;
+    if (e instanceof Unreachable) return e.message;
     return String(e.message || e);
   }
 
@@ -135,14 +136,53 @@ class App {
       }
       this.notify(this.describe(e), 'error');
     }
+    let away = false;
     this.stopFeed = this.api.feed(
       (change) => this.onChange(change),
       (state) => {
         $('#feed-state').textContent = state;
         $('#feed-state').className = state;
         if (state === 'token') $('#token-dialog').hidden = false;
+        if (state === 'live' && away) this.resync();
+        away = state !== 'live';
       },
     );
+  }
+
+  // After the feed was away (a daemon restart, the network) or fell behind, changes may have
+  // been missed — a restart also puts every channel back on its content — so everything shown
+  // is read again, and the technician told of any edit that never reached the daemon.
+  async resync() {
+    const lost = this.api.lostWrites;
+    this.api.lostWrites = 0;
+    if (lost) {
+      this.notify(
+        `the daemon is back; ${lost === 1 ? 'an edit' : `${lost} edits`} made while it was away ${
+          lost === 1 ? 'was' : 'were'
+        } not saved: what is shown now is what it holds`,
+        'warn',
+      );
+    } else if ($('#notice').textContent.includes('cannot be reached')) {
+      this.notify('the daemon is back');
+    }
+    try {
+      const { revision } = await this.api.get('/v1/channels');
+      if (revision !== this.rigRevision) {
+        await this.loadRig();
+        return;
+      }
+      for (const c of this.channels) this.channelStatus(c.id);
+      await Promise.all([
+        this.view.loadTiles(),
+        this.view.loadPreview(),
+        this.content.load(this.channel),
+        this.patterns.load(this.channel),
+        this.historyPanel.load(),
+        this.nodes.load(),
+      ]);
+    } catch (e) {
+      this.notify(this.describe(e), 'error');
+    }
   }
 
   async loadRig() {
@@ -220,6 +260,10 @@ class App {
       }
       if (change.kind === 'node') {
         await this.nodes.load();
+        return;
+      }
+      if (change.kind === 'lagged') {
+        await this.resync();
         return;
       }
       if (change.channel) this.channelStatus(change.channel);

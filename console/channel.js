@@ -59,6 +59,9 @@ export class ChannelView {
       e.preventDefault();
       this.applyForm();
     });
+    this.$('#feature-form').addEventListener('input', () => {
+      if (this.form) this.form.dirty = true;
+    });
     for (const b of document.querySelectorAll('[data-tile-op]')) {
       b.addEventListener('click', () => this.tileOp(b.dataset.tileOp));
     }
@@ -331,15 +334,17 @@ export class ChannelView {
   }
 
   // Sends edits of channel `id` made against revision `base`; a conflict is shown, never
-  // dropped, and choosing what to do about it still writes to that channel.
-  async patch(id, edits, base, merge = false) {
+  // dropped, and choosing what to do about it still writes to that channel. `form` is the
+  // feature form the edits came from, if they did.
+  async patch(id, edits, base, { merge = false, form = null } = {}) {
     try {
       const r = await this.app.api.write('PATCH', `/v1/channels/${id}/tiles`, { edits, merge }, base);
       this.app.notify(`tiles revision ${r.revision} of ${id}`);
       this.app.clearConflict();
       if (id !== this.id) return true;
+      // The form's own numbers, written: it follows the screen again.
+      if (form && form === this.form) form.dirty = false;
       await this.changed('tiles', r.revision);
-      if (this.form) this.form.base = this.revision;
       this.showForm();
       return true;
     } catch (e) {
@@ -355,8 +360,8 @@ export class ChannelView {
             this.closeForm();
             await this.loadTiles();
           },
-          reapply: () => this.patch(id, edits, e.current),
-          merge: () => this.patch(id, edits, base, true),
+          reapply: () => this.patch(id, edits, e.current, { form }),
+          merge: () => this.patch(id, edits, base, { merge: true, form }),
         });
       } else {
         this.app.notify(this.app.describe(e), 'error');
@@ -418,11 +423,16 @@ export class ChannelView {
     }
   }
 
-  // The feature form edits one feature's numbers; it keeps the revision it was opened at, so
-  // applying it after someone else changed the screen is a conflict, not a silent overwrite.
+  // The feature form edits one feature's numbers. Its numbers and the revision they were read
+  // at move together: untouched, the form follows every new revision (a drag of the feature
+  // shows in it at once); once typed in, it keeps the revision it was typed against, so that
+  // applying it after any change since — this console's own drags included — is a conflict,
+  // never a silent overwrite.
   openForm(pick) {
-    this.form = { ...pick, base: this.revision };
-    this.showForm(true);
+    // Pressing the feature the form already shows (to drag it) keeps what was typed.
+    if (this.form && this.form.column === pick.column && this.form.row === pick.row) return;
+    this.form = { ...pick, base: this.revision, dirty: false };
+    this.showForm();
   }
 
   closeForm() {
@@ -430,18 +440,21 @@ export class ChannelView {
     this.$('#feature-form').hidden = true;
   }
 
-  showForm(fill = false) {
+  showForm() {
     const form = this.$('#feature-form');
     if (!this.form || !this.tiles) return;
     const f = grid(this.tiles).at(this.form.column, this.form.row);
     if (!f) return this.closeForm();
     form.hidden = false;
     this.$('#feature-name').textContent = `feature column ${this.form.column}, row ${this.form.row}`;
-    this.$('#feature-base').textContent =
-      this.form.base === this.revision ? `at revision ${this.form.base}` : `opened at revision ${this.form.base}; revision ${this.revision} is newer`;
-    if (fill) {
+    if (!this.form.dirty) {
+      this.form.base = this.revision;
       for (const k of ['phi', 'theta', 'f', 'scale']) form.elements[k].value = f[k];
     }
+    this.$('#feature-base').textContent =
+      this.form.base === this.revision
+        ? `at revision ${this.form.base}`
+        : `typed against revision ${this.form.base}; revision ${this.revision} is newer`;
   }
 
   async applyForm() {
@@ -456,6 +469,6 @@ export class ChannelView {
       }
       edit[k] = v;
     }
-    await this.patch(this.id, [edit], this.form.base);
+    await this.patch(this.id, [edit], this.form.base, { form: this.form });
   }
 }

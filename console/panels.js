@@ -525,19 +525,44 @@ export class HistoryPanel {
   async load() {
     const { body } = await this.app.api.get('/v1/history?limit=40');
     const list = $('#history');
+    // Newest first: a resource's first entry is its current revision, which there is nothing
+    // to revert to.
+    const seen = new Set();
     list.replaceChildren(
       ...body.history.map((h) => {
         const li = el('li', {}, `${new Date(h.at_ms).toLocaleTimeString()} ${h.who}: ${h.action} ${h.resource} → ${h.revision} `);
-        if (/^(rig|channels\/[^/]+\/(content|tiles))$/.test(h.resource)) {
+        const current = !seen.has(h.resource);
+        seen.add(h.resource);
+        if (current) {
+          li.append(el('span', { class: 'current' }, 'current'));
+        } else if (/^(rig|channels\/[^/]+\/(content|tiles))$/.test(h.resource)) {
           const back = el('button', { class: 'revert', title: `make revision ${h.revision} of ${h.resource} current again` }, 'revert');
           back.dataset.resource = h.resource;
           back.dataset.revision = h.revision;
-          back.addEventListener('click', () => this.revert(h.resource, h.revision));
+          back.addEventListener('click', () => this.confirm(back, h.resource, h.revision));
           li.append(back);
         }
         return li;
       }),
     );
+  }
+
+  // A revert changes what the projectors show: the first press asks, a second within a few
+  // seconds does it.
+  confirm(button, resource, revision) {
+    if (button.dataset.armed) {
+      delete button.dataset.armed;
+      button.textContent = 'revert';
+      this.revert(resource, revision);
+      return;
+    }
+    button.dataset.armed = 'yes';
+    button.textContent = `make ${revision} current? press again`;
+    setTimeout(() => {
+      if (!button.dataset.armed) return;
+      delete button.dataset.armed;
+      button.textContent = 'revert';
+    }, 5000);
   }
 
   async revert(resource, revision) {

@@ -118,6 +118,7 @@ export class RigView {
       ctx.stroke();
     };
     for (const l of g.wall) line(l, 'rgba(170, 180, 190, 0.35)', 1);
+    const labels = [];
     g.channels.forEach((ch, k) => {
       const colour = channelColour(k);
       const strong = this.selected === null || this.selected === ch.id;
@@ -128,13 +129,10 @@ export class RigView {
       for (const l of ch.spill) line(l, colour, 1);
       ctx.setLineDash([]);
       const q = project(ch.position);
-      if (q) {
-        ctx.fillStyle = colour;
-        ctx.font = `${12 * ratio}px system-ui, sans-serif`;
-        ctx.fillText(ch.id, q[0] + 6 * ratio, q[1] - 6 * ratio);
-      }
+      if (q) labels.push({ q, text: ch.id, colour, alpha: ctx.globalAlpha });
       ctx.globalAlpha = 1;
     });
+    this.labels = this.placeLabels(ctx, labels, ratio);
     const eye = project(g.eye);
     if (eye) {
       ctx.fillStyle = '#fff';
@@ -158,5 +156,34 @@ export class RigView {
         ctx.strokeRect(q[0] - 5 * ratio, q[1] - 5 * ratio, 10 * ratio, 10 * ratio);
       }
     }
+  }
+
+  // Projectors often hang side by side, so their names would print over each other: each label
+  // goes beside its projector, moved down past the labels already placed, with a leader line
+  // when it had to move. The boxes, in canvas pixels, are kept (tests read them).
+  placeLabels(ctx, labels, ratio) {
+    ctx.font = `${12 * ratio}px system-ui, sans-serif`;
+    const height = 16 * ratio;
+    const placed = [];
+    for (const l of labels.sort((a, b) => a.q[1] - b.q[1] || a.q[0] - b.q[0])) {
+      const box = { x: l.q[0] + 6 * ratio, y: l.q[1] - 6 * ratio - 12 * ratio, w: ctx.measureText(l.text).width, h: height };
+      const hits = () => placed.some((p) => box.x < p.x + p.w && p.x < box.x + box.w && box.y < p.y + p.h && p.y < box.y + box.h);
+      const start = box.y;
+      while (hits()) box.y += height;
+      ctx.globalAlpha = l.alpha;
+      ctx.fillStyle = l.colour;
+      ctx.strokeStyle = l.colour;
+      if (box.y !== start) {
+        ctx.lineWidth = ratio;
+        ctx.beginPath();
+        ctx.moveTo(l.q[0], l.q[1]);
+        ctx.lineTo(box.x, box.y + 12 * ratio);
+        ctx.stroke();
+      }
+      ctx.fillText(l.text, box.x, box.y + 12 * ratio);
+      ctx.globalAlpha = 1;
+      placed.push({ ...box, text: l.text });
+    }
+    return placed;
   }
 }

@@ -27,9 +27,9 @@ const chromiumArgs = [
   '--disable-sync',
 ];
 
-// Starts the daemon on port 0 and resolves with its base address once it listens.
-function daemon(args) {
-  const child = spawn(bin, ['serve', '--bind', '127.0.0.1:0', ...args], { stdio: ['ignore', 'pipe', 'pipe'] });
+// Starts the daemon (on port 0 unless told) and resolves with its base address once it listens.
+function daemon(args, bind = '127.0.0.1:0') {
+  const child = spawn(bin, ['serve', '--bind', bind, ...args], { stdio: ['ignore', 'pipe', 'pipe'] });
   let log = '';
   child.stderr.on('data', (d) => (log += d));
   const base = new Promise((ok, fail) => {
@@ -149,6 +149,15 @@ test('the console loads: channels, the rig in 3D, the feed live, a preview', asy
       return lit;
     });
     assert.ok(drawn > 500, `${drawn} pixels of the rig drawn`);
+    // The projectors hang side by side: their names are placed apart, not over each other.
+    const labels = await pageA.evaluate(() => window.omniwarp.rig.labels);
+    assert.deepEqual(labels.map((l) => l.text).sort(), ['centre', 'left', 'right']);
+    for (const [k, p] of labels.entries()) {
+      for (const q of labels.slice(k + 1)) {
+        const apart = p.x + p.w <= q.x || q.x + q.w <= p.x || p.y + p.h <= q.y || q.y + q.h <= p.y;
+        assert.ok(apart, `labels ${p.text} and ${q.text} overlap: ${JSON.stringify(labels)}`);
+      }
+    }
     // The plan beneath it: the figures and the picture of the current rig revision.
     await pageA.waitForSelector('#plan[data-revision]');
     assert.match(await pageA.textContent('#plan-summary'), /lit by no projector .* overlap/);
@@ -198,15 +207,16 @@ test('two technicians: a conflict is shown and resolved, no acknowledged edit lo
     await pageB.unrouteAll({ behavior: 'wait' });
     await selectChannel(pageB, 'centre');
     await tilesRevision(pageB, 2);
-    // B opens the feature's form at revision 2 …
+    // B types into the feature's form at revision 2 …
     await pageB.click(`#overlay circle[data-column="16"][data-row="9"]`);
     await pageB.waitForSelector('#feature-form:not([hidden])');
+    await pageB.fill('#feature-form input[name=phi]', '-3.5');
     // … A moves the same feature (revision 3), and B sees it within a second.
     await drag(pageA, 16, 9, 0, 12);
     await tilesRevision(pageA, 3);
     await seen(pageB, 3);
     const fromA = await feature('centre', 16, 9, 3);
-    await pageB.fill('#feature-form input[name=phi]', '-3.5');
+    assert.match(await pageB.textContent('#feature-base'), /typed against revision 2; revision 3 is newer/);
     await pageB.click('#feature-form button[type=submit]');
     await pageB.waitForSelector('#conflict:not([hidden])');
     assert.match(await pageB.textContent('#conflict-text'), /revision 3 while you edited revision 2/);
@@ -221,11 +231,11 @@ test('two technicians: a conflict is shown and resolved, no acknowledged edit lo
 
     // Edits of different features merge: B at revision 4, A's edit of another feature first.
     await pageB.click(`#overlay circle[data-column="8"][data-row="6"]`);
+    await pageB.fill('#feature-form input[name=theta]', '19.5');
     await drag(pageA, 20, 12, -10, 0);
     await tilesRevision(pageA, 5);
     await seen(pageB, 5);
     const movedByA = await feature('centre', 20, 12, 5);
-    await pageB.fill('#feature-form input[name=theta]', '19.5');
     await pageB.click('#feature-form button[type=submit]');
     await pageB.waitForSelector('#conflict-merge:not([hidden])');
     await pageB.click('#conflict-merge');
@@ -277,8 +287,18 @@ test('a region picked by rectangle moves as one; rapid keyboard nudges queue, no
     const nine = await api('/v1/channels/centre/tiles?revision=9');
     const changed = eight.tiles.layout.features.filter((f, k) => f.phi !== nine.tiles.layout.features[k].phi);
     assert.equal(changed.length, 10, 'the first nudge moved the ten picked features');
-    // Any revision in the history can be made current again.
-    await pageA.click('#history button.revert[data-resource="channels/centre/tiles"][data-revision="2"]');
+    // Any revision in the history but the current one can be made current again, on a second
+    // press: the first only asks.
+    await pageA.waitForFunction(() => /channels\/centre\/tiles → 11/.test(document.querySelector('#history').textContent));
+    const newest = pageA.locator('#history li', { hasText: 'channels/centre/tiles → 11' }).first();
+    assert.equal(await newest.locator('button.revert').count(), 0, 'no revert on the current revision');
+    assert.equal(await newest.locator('.current').count(), 1);
+    const revert = '#history button.revert[data-resource="channels/centre/tiles"][data-revision="2"]';
+    await pageA.click(revert);
+    assert.match(await pageA.textContent(revert), /press again/);
+    await pageA.waitForTimeout(500);
+    assert.equal((await api('/v1/channels/centre/tiles')).revision, 11, 'one press reverts nothing');
+    await pageA.click(revert);
     await tilesRevision(pageA, 12);
     const two = await api('/v1/channels/centre/tiles?revision=2');
     assert.deepEqual((await api('/v1/channels/centre/tiles')).tiles.layout, two.tiles.layout);
@@ -513,6 +533,86 @@ test('a nudge does not wait for the preview of the one before it', async () => {
   } finally {
     release();
     await close();
+  }
+});
+
+// Issue 48, bug 1: the form once kept the numbers it was opened with while its revision moved
+// on with this console's own drags, so Apply wrote the old numbers back over a drag.
+test('the feature form follows a drag of its feature; typed numbers never overwrite one silently', async () => {
+  await step('form', async () => {
+    await selectChannel(pageA, 'centre');
+    const n = (await api('/v1/channels/centre/tiles')).revision;
+    await tilesRevision(pageA, n);
+    const [x, y] = await handle(pageA, 10, 12);
+    await pageA.mouse.click(x, y);
+    await pageA.waitForSelector('#feature-form:not([hidden])');
+    await drag(pageA, 10, 12, 0, -20);
+    await tilesRevision(pageA, n + 1);
+    const dragged = await feature('centre', 10, 12);
+    await pageA.waitForFunction(
+      (t) => Number(document.querySelector('#feature-form input[name=theta]').value) === t,
+      dragged.theta,
+    );
+    assert.equal(await pageA.textContent('#feature-base'), `at revision ${n + 1}`);
+    // Applied as shown, the drag stays.
+    await pageA.click('#feature-form button[type=submit]');
+    await tilesRevision(pageA, n + 2);
+    assert.equal((await feature('centre', 10, 12)).theta, dragged.theta);
+    // Typed, then dragged: the form keeps what was typed, and applying it is a conflict.
+    await pageA.fill('#feature-form input[name=phi]', '1.25');
+    await drag(pageA, 10, 12, 0, 10);
+    await tilesRevision(pageA, n + 3);
+    assert.equal(await pageA.inputValue('#feature-form input[name=phi]'), '1.25');
+    await pageA.click('#feature-form button[type=submit]');
+    await pageA.waitForSelector('#conflict:not([hidden])');
+    assert.match(await pageA.textContent('#conflict-text'), new RegExp(`revision ${n + 3} while you edited revision ${n + 2}`));
+    await pageA.click('#conflict-reload');
+    assert.equal((await api('/v1/channels/centre/tiles')).revision, n + 3, 'nothing written over the drag');
+  });
+});
+
+// Issue 48, bugs 2 and 3: after a restart (which puts every channel back on its content) the
+// console still said "grid" and its next card met a 412; an edit made while the daemon was down
+// said "Failed to fetch", and nothing said it was lost.
+test('across a daemon restart: what each channel shows, and an edit made while it was away said not saved', async () => {
+  const dir = join(work, 'restarted');
+  let d = daemon(['--demo', '--data', dir]);
+  const home = await d.base;
+  const context = await browser.newContext({ viewport: { width: 1280, height: 900 } });
+  const page = await context.newPage();
+  pages.push(page);
+  let refused = 0;
+  page.on('response', (r) => {
+    if (r.status() === 412) refused++;
+  });
+  try {
+    await step('restart', async () => {
+      await page.goto(`${home}/`);
+      await page.waitForSelector('#channels li >> nth=2');
+      await page.waitForFunction(() => document.querySelector('#feed-state').textContent === 'live');
+      await page.waitForSelector('#overlay circle');
+      await page.click('[data-show=grid]');
+      await page.waitForFunction(() => document.querySelector('#showing').textContent === 'grid');
+      d.child.kill();
+      await page.waitForFunction(() => document.querySelector('#feed-state').textContent === 'offline');
+      await drag(page, 16, 9, 12, 0);
+      await page.waitForFunction(() => /not saved/.test(document.querySelector('#notice').textContent));
+      assert.doesNotMatch(await page.textContent('#notice'), /Failed to fetch/);
+      d = daemon(['--demo', '--data', dir], home.replace('http://', ''));
+      await d.base;
+      await page.waitForFunction(() => document.querySelector('#feed-state').textContent === 'live', null, { timeout: 10000 });
+      await page.waitForFunction(() => document.querySelector('#showing').textContent === 'content', null, { timeout: 5000 });
+      await page.waitForFunction(() => /back; an edit made while it was away was not saved/.test(document.querySelector('#notice').textContent));
+      await page.waitForFunction(() => /shows content/.test(document.querySelector('#channels li[data-channel="left"] .status').textContent));
+      assert.equal((await (await fetch(`${home}/v1/channels/left/tiles`)).json()).follows_geometry, true, 'the lost edit was not made');
+      await page.click('[data-show=crosshatch]');
+      await page.waitForFunction(() => document.querySelector('#showing').textContent === 'crosshatch');
+      assert.equal(refused, 0, 'no card met a stale revision');
+    });
+  } finally {
+    d.child.kill();
+    pages.splice(pages.indexOf(page), 1);
+    await context.close();
   }
 });
 
