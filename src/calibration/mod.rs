@@ -408,6 +408,7 @@ impl Calibration {
                 look_up: None,
                 rvec: Some(rvec.to_array()),
             },
+            contrast: None,
         }
     }
 }

@@ -11,7 +11,7 @@ use omniwarp::normalmap::NormalMap;
 use omniwarp::projection::Orientation;
 use omniwarp::raster::{Pixel, Raster};
 use omniwarp::render::{self, Filter, Warp};
-use omniwarp::rig::{Channel, Rig, signal_gains};
+use omniwarp::rig::{Channel, ChannelBlend, Rig};
 use omniwarp::tiles::TileScreen;
 use omniwarp::tiles::adapt::Report;
 use std::path::{Path, PathBuf};
@@ -193,18 +193,17 @@ pub fn channel<'a>(rig: &'a Rig, id: &str) -> Result<&'a Channel> {
 }
 
 /// A channel's warp map (for a panorama projected from `project_from`, if given) and its blend
-/// mask in signal space, for `render --rig` and
-/// `play --rig`.
+/// and black lift, for `render --rig`.
 pub fn render_inputs(
     path: &Path,
     id: &str,
     gamma: f64,
     project_from: Option<DVec3>,
-) -> Result<(NormalMap, Vec<f32>)> {
+) -> Result<(NormalMap, ChannelBlend)> {
     let rig = read_rig(path)?;
     let ch = channel(&rig, id)?;
     let w = rig.warp(ch);
-    let mask = signal_mask(&rig, ch, &w.points, gamma)?;
+    let blend = channel_blend(&rig, ch, &w.points, gamma)?;
     let map = match project_from {
         Some(c) => {
             let c = rig.check_centre(c, "project-from").map_err(flag_error)?;
@@ -214,17 +213,17 @@ pub fn render_inputs(
         }
         None => w.map,
     };
-    Ok((map, mask))
+    Ok((map, blend))
 }
 
-/// The blend weights of a channel's pixels in signal space, m = w^(1/γ).
-pub fn signal_mask(
+/// A channel's blend, and its black lift when the rig's projectors have a contrast.
+pub fn channel_blend(
     rig: &Rig,
     ch: &Channel,
     points: &[Option<DVec3>],
     gamma: f64,
-) -> Result<Vec<f32>> {
-    signal_gains(&rig.blend_weights(ch, points), gamma).map_err(flag_error)
+) -> Result<ChannelBlend> {
+    rig.channel_blend(ch, points, gamma).map_err(flag_error)
 }
 
 pub fn read_tiles(path: &Path) -> Result<TileScreen> {

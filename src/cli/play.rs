@@ -3,14 +3,13 @@
 //! a rig file (`--rig` with `--content` or `--show`). See `src/play/` and docs/player.md.
 
 use crate::cli::args::{ContentArgs, flag_error};
-use crate::cli::io::{AnyContent, channel, load_content, read_rig, signal_mask};
+use crate::cli::io::{AnyContent, channel, channel_blend, load_content, read_rig};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use omniwarp::content::testcard::{self, Card, Label};
 use omniwarp::play::follow::{self, Daemon};
 use omniwarp::play::{self, Deliver, Output, Picture, Status, Update};
 use omniwarp::render::{self, Filter, Warp};
-use omniwarp::rig::apply_gains;
 use std::net::ToSocketAddrs;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -215,7 +214,7 @@ fn pictures(a: &PlayArgs) -> Result<Vec<Picture>> {
         let ch = channel(&rig, &o.channel)?;
         let index = ids.iter().position(|c| *c == o.channel).unwrap_or(0);
         let warp = rig.warp(ch);
-        let gains = signal_mask(&rig, ch, &warp.points, a.gamma)?;
+        let blend = channel_blend(&rig, ch, &warp.points, a.gamma)?;
         let map = warp.map;
         let image = match &what {
             What::Card(card) => testcard::draw(
@@ -230,7 +229,7 @@ fn pictures(a: &PlayArgs) -> Result<Vec<Picture>> {
                 let (w, h) = (ch.width, ch.height);
                 let mut img = render::render(Warp::Map(&map), c, w, h, 1, Filter::Bilinear)
                     .map_err(flag_error)?;
-                apply_gains(&mut img, &gains).map_err(flag_error)?;
+                blend.apply(&mut img).map_err(flag_error)?;
                 img
             }
         };

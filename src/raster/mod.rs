@@ -97,6 +97,8 @@ pub fn check_size(width: u32, height: u32, supersample: u32) -> Result<()> {
 /// A pixel the renderer can filter. Values stay in the type's own scale (0–255 for 8-bit), so
 /// filtering needs no conversion beyond to and from `f32`.
 pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 'static {
+    /// Full scale in the type's own units: 255 for 8-bit, 1 for float.
+    const FULL: f32;
     /// The four channels R, G, B, A as `f32`, in the type's own scale (0–255 for 8-bit).
     fn to_f32(self) -> [f32; 4];
     /// Rounds and clamps where the type needs it.
@@ -124,6 +126,7 @@ pub trait Pixel: Copy + Send + Sync + Default + PartialEq + std::fmt::Debug + 's
 }
 
 impl Pixel for [u8; 4] {
+    const FULL: f32 = 255.0;
     fn to_f32(self) -> [f32; 4] {
         self.map(f32::from)
     }
@@ -152,6 +155,7 @@ impl Pixel for [u8; 4] {
 }
 
 impl Pixel for [f32; 4] {
+    const FULL: f32 = 1.0;
     fn to_f32(self) -> [f32; 4] {
         self
     }

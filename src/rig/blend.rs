@@ -201,6 +201,33 @@ pub fn blend_png_bytes(
     weights: &[f32],
     opts: BlendOptions,
 ) -> Result<Vec<u8>> {
+    mask_png_bytes(width, height, weights, opts, "omniwarp.blend_gamma")
+}
+
+/// Writes a channel's black lift β (linear light) as a grey PNG in signal space, b = β^(1/γ),
+/// the way the blend mask is written: a reader applying `colour · m · (1 − b) + b` to the
+/// signal (SGCT's black-level mask) puts out β of light where the content is black.
+pub fn write_black_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    lift: &[f32],
+    opts: BlendOptions,
+) -> Result<()> {
+    let bytes = mask_png_bytes(width, height, lift, opts, "omniwarp.black_gamma")?;
+    atomic_write(path, |f| {
+        f.write_all(&bytes).map_err(|e| Error::file(path, e))
+    })
+}
+
+/// Values in 0–1 as a grey PNG of `opts.bits`, raised to 1/γ, the gamma in text chunk `key`.
+fn mask_png_bytes(
+    width: u32,
+    height: u32,
+    weights: &[f32],
+    opts: BlendOptions,
+    key: &str,
+) -> Result<Vec<u8>> {
     if !(opts.gamma.is_finite() && opts.gamma > 0.0) {
         return Err(Error::invalid(
             "gamma",
@@ -232,7 +259,7 @@ pub fn blend_png_bytes(
         } else {
             png::BitDepth::Sixteen
         });
-        enc.add_text_chunk("omniwarp.blend_gamma".into(), format!("{}", opts.gamma))
+        enc.add_text_chunk(key.into(), format!("{}", opts.gamma))
             .map_err(png_err)?;
         let mut w = enc.write_header().map_err(png_err)?;
         w.write_image_data(&data).map_err(png_err)?;

@@ -10,6 +10,7 @@
 mod blend;
 mod canvas;
 mod coverage;
+mod photometry;
 pub mod plan;
 pub mod schema;
 mod tiles;
@@ -17,10 +18,12 @@ mod warp;
 
 pub use canvas::{Canvas, Layout};
 pub use coverage::Coverage;
+pub use photometry::{ChannelBlend, apply_blend_and_lift};
 pub use plan::{ChannelPlan, Overlap, Plan, PointPlan, WallPlan};
 
 pub use blend::{
-    BlendOptions, apply_gains, blend_png_bytes, gain, gains_image, signal_gains, write_blend_png,
+    BlendOptions, apply_gains, blend_png_bytes, gain, gains_image, signal_gains, write_black_png,
+    write_blend_png,
 };
 pub use tiles::{SAMPLED_COLUMNS, default_rows};
 pub use warp::ChannelWarp;
@@ -165,6 +168,12 @@ pub struct ChannelDoc {
     pub lens: LensDoc,
     /// Where the projector is and where it points (projector-to-world).
     pub pose: PoseDoc,
+    /// The projector's contrast ratio, full white over full black (2000 for 2,000:1; more
+    /// than 1, at most 10,000,000). With it the channel's pictures are lifted in the dark
+    /// where fewer projectors overlap, so that a black frame is evenly black
+    /// (docs/photometry.md). Left out: the projector shows true black.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contrast: Option<f64>,
 }
 
 /// A lens as the rig file writes it (a channel's `lens`); docs/lens-models.md has the models.
@@ -293,6 +302,8 @@ pub struct Channel {
     pub position: DVec3,
     /// Projector frame to world.
     pub rotation: DMat3,
+    /// Full white over full black, from the channel's `contrast`; `None` for true black.
+    pub contrast: Option<f64>,
 }
 
 impl Channel {
@@ -313,6 +324,7 @@ impl Channel {
                 look_up: None,
                 rvec: Some((axis * angle).to_array()),
             },
+            contrast: self.contrast,
         }
     }
 
@@ -361,6 +373,14 @@ impl Channel {
                 ));
             }
         };
+        if let Some(k) = c.contrast
+            && !(k.is_finite() && k > 1.0 && k <= 1e7)
+        {
+            return Err(Error::invalid(
+                at("contrast"),
+                format!("must be more than 1 and at most 10000000 (white over black), got {k}"),
+            ));
+        }
         Ok(Channel {
             id: c.id.clone(),
             width: w,
@@ -368,6 +388,7 @@ impl Channel {
             lens,
             position,
             rotation,
+            contrast: c.contrast,
         })
     }
 }

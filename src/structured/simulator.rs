@@ -553,6 +553,7 @@ pub fn fisheye_at_eye(rig: &Rig, projector: &Channel, w: u32, h: u32) -> Result<
             look_up: Some(up.to_array()),
             rvec: None,
         },
+        contrast: None,
     };
     Channel::from_doc(&doc, "/camera")
 }

@@ -7,5 +7,6 @@ mod common;
 mod cli;
 mod house;
 mod movie;
+mod photometry;
 mod readme;
 mod rig;

@@ -42,6 +42,7 @@ fn fisheye(w: u32, h: u32) -> Channel {
             look_up: Some([0.0, 0.0, -1.0]),
             rvec: None,
         },
+        contrast: None,
     };
     Channel::from_doc(&doc, "/camera").unwrap()
 }
@@ -61,6 +62,7 @@ fn pinhole(w: u32, h: u32, f: f64, look_to: [f64; 3]) -> Channel {
             look_up: Some([0.0, 1.0, 0.0]),
             rvec: None,
         },
+        contrast: None,
     };
     Channel::from_doc(&doc, "/camera").unwrap()
 }

@@ -96,6 +96,7 @@ pub fn run(dome_rig: &Path) -> Result<()> {
                             look_up: Some([0.0, 1.0, 0.0]),
                             rvec: None,
                         },
+                        contrast: None,
                     }],
                     canvas: None,
                 };

@@ -7,8 +7,8 @@ use crate::cli::args::{
     parse_size, parse_vec3,
 };
 use crate::cli::io::{
-    AnyContent, AnyRaster, channel, is_exr, load_content, read_rig, read_tiles, render_inputs,
-    signal_mask, write_output,
+    AnyContent, AnyRaster, channel, channel_blend, is_exr, load_content, read_rig, read_tiles,
+    render_inputs, write_output,
 };
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
@@ -22,7 +22,7 @@ use omniwarp::projection::View;
 use omniwarp::raster::Raster;
 use omniwarp::render::blur::Blur;
 use omniwarp::render::{self, Warp};
-use omniwarp::rig::apply_gains;
+use omniwarp::rig::signal_gains;
 use omniwarp::scene::ppp::{Pieces, Tolerance};
 use omniwarp::scene::{Projected, Scene};
 use omniwarp::tiles::raster::saturation;
@@ -160,7 +160,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 saturation(&mut r, e);
             }
             if let Some(m) = &mask {
-                apply_gains(&mut r, m)?;
+                m.apply(&mut r)?;
             }
             AnyRaster::U8(r)
         }
@@ -170,7 +170,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 saturation(&mut r, e);
             }
             if let Some(m) = &mask {
-                apply_gains(&mut r, m)?;
+                m.apply(&mut r)?;
             }
             AnyRaster::F32(r)
         }
@@ -204,7 +204,14 @@ fn render_movie(a: &RenderArgs) -> Result<()> {
                     .collect(),
             };
             for id in ids {
-                let (map, gains) = render_inputs(rig, &id, a.gamma, a.project_from)?;
+                let (map, blend) = render_inputs(rig, &id, a.gamma, a.project_from)?;
+                if blend.lift.is_some() {
+                    bail!(
+                        "--rig: black-level compensation (the channels' contrast) is applied to \
+                         stills so far, not to movies; leave contrast out of the rig for a movie"
+                    );
+                }
+                let gains = signal_gains(&blend.weights, blend.gamma).map_err(flag_error)?;
                 outputs.push(movie::Output {
                     path: PathBuf::from(template.to_string_lossy().replace("{channel}", &id)),
                     source: movie::Source::Map(map),
@@ -312,7 +319,7 @@ fn render_channel_on_wall(
     };
     let (mut img, report) = r.frame_map(&warp.map, &opts).map_err(flag_error)?;
     eprintln!("{}: cube faces at {}²", r.describe(), report.face);
-    apply_gains(&mut img, &signal_mask(&rig, ch, &warp.points, a.gamma)?)?;
+    channel_blend(&rig, ch, &warp.points, a.gamma)?.apply(&mut img)?;
     write_output(out, AnyRaster::U8(img), &[])
 }
 
