@@ -146,6 +146,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
             None => mpcdi::Reader::Vesa,
         };
         let mut regions = Vec::new();
+        let target = rig.black_target();
         for ch in &rig.channels {
             let warp = warp_of(ch);
             let uv = canvas
@@ -153,6 +154,9 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 .map(|c| export::content_uv_unbounded(&warp.map, c))
                 .unwrap_or_else(|| vec![None; warp.points.len()]);
             let weights = rig.blend_weights(ch, &warp.points);
+            let lift = rig
+                .has_black()
+                .then(|| rig.black_lift(ch, &warp.points, &weights, target));
             let src = Sources {
                 id: &ch.id,
                 width: ch.width as usize,
@@ -162,6 +166,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 points: &warp.points,
                 eye: rig.eye,
                 weights: &weights,
+                lift: lift.as_deref(),
                 cancel: &never,
             };
             let bits = if a.alpha_bits == "16" { 16 } else { 8 };
@@ -224,6 +229,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 points: &warp.points,
                 eye: rig.eye,
                 weights: &weights,
+                lift: None,
                 cancel: &never,
             };
             let tol = tolerance(0.5)?;

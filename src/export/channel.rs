@@ -7,7 +7,7 @@ use super::bourke::MeshReader;
 use super::grid::{self, Chosen, Layout, Reading};
 use super::mpcdi::{self, Profile, Reader, Region};
 use crate::error::{Error, Result};
-use crate::rig::{BlendOptions, blend_png_bytes};
+use crate::rig::{BlendOptions, black_png_bytes, blend_png_bytes};
 use glam::DVec3;
 use std::sync::atomic::AtomicBool;
 
@@ -30,6 +30,9 @@ pub struct Sources<'a> {
     pub eye: DVec3,
     /// Linear blend weights per pixel.
     pub weights: &'a [f32],
+    /// Black lift β per pixel, linear light, when the rig's projectors have a contrast
+    /// (docs/photometry.md): MPCDI regions then carry a beta map.
+    pub lift: Option<&'a [f32]>,
     /// Set when the export is no longer wanted: grid searches stop with [`Error::Cancelled`].
     pub cancel: &'a AtomicBool,
 }
@@ -195,27 +198,36 @@ impl Sources<'_> {
         Ok((c, rows))
     }
 
-    /// Alpha (blend weights), zero wherever the profile's field has no value, so players that
+    /// `values` per pixel, zero wherever the profile's field has no value, so players that
     /// extrapolate NaN still show black there.
-    fn alpha_png(&self, profile: Profile, bits: u8) -> Result<Vec<u8>> {
-        let w: Vec<f32> = (0..self.weights.len())
+    fn known(&self, profile: Profile, values: &[f32]) -> Vec<f32> {
+        (0..values.len())
             .map(|n| {
                 let known = match profile {
                     Profile::TwoD => self.uv[n].is_some_and(super::inside),
                     Profile::A3 => self.points[n].is_some(),
                 };
-                if known { self.weights[n] } else { 0.0 }
+                if known { values[n] } else { 0.0 }
             })
-            .collect();
-        blend_png_bytes(
-            self.width as u32,
-            self.height as u32,
-            &w,
-            BlendOptions {
-                gamma: mpcdi::ALPHA_GAMMA,
-                bits,
-            },
-        )
+            .collect()
+    }
+
+    /// Alpha (blend weights) in signal space, gamma [`mpcdi::ALPHA_GAMMA`] embedded.
+    fn alpha_png(&self, profile: Profile, bits: u8) -> Result<Vec<u8>> {
+        let (w, h) = (self.width as u32, self.height as u32);
+        let w_known = self.known(profile, self.weights);
+        blend_png_bytes(w, h, &w_known, mask_options(bits))
+    }
+
+    /// Beta (the black lift) in signal space, β^(1/γ) with the alpha map's gamma: readers
+    /// add it to the signal, `colour · alpha · (1 − beta) + beta`, so that a black frame puts
+    /// out β of light.
+    fn beta_png(&self, profile: Profile, bits: u8) -> Result<Option<Vec<u8>>> {
+        let Some(lift) = self.lift else {
+            return Ok(None);
+        };
+        let (w, h) = (self.width as u32, self.height as u32);
+        black_png_bytes(w, h, &self.known(profile, lift), mask_options(bits)).map(Some)
     }
 
     /// The channel's MPCDI region for `reader` (alpha map of `alpha_bits`, 8 or 16) and the
@@ -251,6 +263,7 @@ impl Sources<'_> {
                 rect,
                 warp: (columns, rows, samples),
                 alpha_png: self.alpha_png(profile, alpha_bits)?,
+                beta_png: self.beta_png(profile, alpha_bits)?,
                 alpha_bits,
             },
             err,
@@ -319,4 +332,12 @@ fn rows_2d(c: &Chosen<2>) -> Vec<[f32; 3]> {
             None => [f32::NAN; 3],
         })
         .collect()
+}
+
+/// Grey maps of `bits` with the gamma MPCDI readers expect embedded.
+fn mask_options(bits: u8) -> BlendOptions {
+    BlendOptions {
+        gamma: mpcdi::ALPHA_GAMMA,
+        bits,
+    }
 }

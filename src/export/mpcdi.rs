@@ -176,6 +176,9 @@ pub struct Region {
     pub warp: (usize, usize, Vec<[f32; 3]>),
     /// Grey alpha map at the projector resolution, gamma 2.2 embedded.
     pub alpha_png: Vec<u8>,
+    /// Grey beta map (black lift) at the projector resolution, in signal space as the alpha
+    /// map, of the same bits; only when the rig's projectors have a contrast.
+    pub beta_png: Option<Vec<u8>>,
     /// Its bits a sample: 8 by default (the VESA reference library and PyMPCDI decode 8 bits
     /// only and garble 16), 16 on request.
     pub alpha_bits: u8,
@@ -261,14 +264,21 @@ pub fn side_by_side(regions: &mut [Region]) -> Vec<[u32; 2]> {
 
 /// The `mpcdi.xml` of a package.
 pub fn xml(h: &Header, regions: &[Region]) -> String {
+    // Beta maps are a level 2 feature: a package with them says so, so that a reader which
+    // checks levels knows to read them.
+    let level = if regions.iter().any(|r| r.beta_png.is_some()) {
+        2
+    } else {
+        1
+    };
     let root = match h.version {
         Version::V1 => format!(
-            r#"<MPCDI profile="{}" level="1" date="{}" version="1.0">"#,
+            r#"<MPCDI profile="{}" level="{level}" date="{}" version="1.0">"#,
             h.profile.name(),
             date(h.unix_time)
         ),
         Version::V2 => format!(
-            r#"<MPCDI profile="{}" geometry="1" color="1" level="1" date="{}" version="2.0">"#,
+            r#"<MPCDI profile="{}" geometry="1" color="{level}" level="{level}" date="{}" version="2.0">"#,
             h.profile.name(),
             date(h.unix_time)
         ),
@@ -298,8 +308,14 @@ pub fn xml(h: &Header, regions: &[Region]) -> String {
     for r in regions {
         let (id, bits) = (escape(&r.id), r.alpha_bits);
         x += &format!(
-            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>{unit}</geometricUnit>\n        <originof3DData>{origin}</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>{bits}</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n    </fileset>\n"
+            "    <fileset region=\"{id}\">\n      <geometryWarpFile>\n        <path>GeometryWarpFile-{id}.pfm</path>\n        <interpolation>linear</interpolation>\n        <geometricUnit>{unit}</geometricUnit>\n        <originof3DData>{origin}</originof3DData>\n      </geometryWarpFile>\n      <alphaMap>\n        <path>AlphaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>{bits}</bitDepth>\n        <gammaEmbedded>{ALPHA_GAMMA}</gammaEmbedded>\n      </alphaMap>\n"
         );
+        if r.beta_png.is_some() {
+            x += &format!(
+                "      <betaMap>\n        <path>BetaMap-{id}.png</path>\n        <componentDepth>1</componentDepth>\n        <bitDepth>{bits}</bitDepth>\n      </betaMap>\n"
+            );
+        }
+        x += "    </fileset>\n";
     }
     x += "  </files>\n</MPCDI>\n";
     x
@@ -338,6 +354,11 @@ pub fn package(h: &Header, regions: &[Region]) -> Result<Vec<u8>> {
         z.start_file(format!("AlphaMap-{}.png", r.id), opts)
             .map_err(zip_err)?;
         z.write_all(&r.alpha_png).map_err(io_err)?;
+        if let Some(beta) = &r.beta_png {
+            z.start_file(format!("BetaMap-{}.png", r.id), opts)
+                .map_err(zip_err)?;
+            z.write_all(beta).map_err(io_err)?;
+        }
     }
     Ok(z.finish().map_err(zip_err)?.into_inner())
 }
@@ -387,6 +408,8 @@ pub struct RegionRead {
     pub alpha: (u32, u32, Vec<f64>),
     /// The alpha map's `<gammaEmbedded>`; 1 if absent or not a number.
     pub gamma_embedded: f64,
+    /// The beta map (black lift) in 0–1 as stored, row-major, if the fileset has one.
+    pub beta: Option<(u32, u32, Vec<f64>)>,
 }
 
 impl Package {
@@ -481,14 +504,21 @@ pub fn read(bytes: &[u8]) -> Result<Package> {
                 let alpha_node = child(fileset, "alphaMap")
                     .ok_or_else(|| bad(format!("region `{id}`: no alphaMap")))?;
                 let alpha_path = text(alpha_node, "path");
-                let img = image::load_from_memory(&member(&alpha_path)?)
-                    .map_err(|e| bad(format!("{alpha_path}: {e}")))?
-                    .into_luma16();
-                let alpha = (
-                    img.width(),
-                    img.height(),
-                    img.pixels().map(|p| f64::from(p.0[0]) / 65535.0).collect(),
-                );
+                let mut grey = |path: &str| -> Result<(u32, u32, Vec<f64>)> {
+                    let img = image::load_from_memory(&member(path)?)
+                        .map_err(|e| bad(format!("{path}: {e}")))?
+                        .into_luma16();
+                    Ok((
+                        img.width(),
+                        img.height(),
+                        img.pixels().map(|p| f64::from(p.0[0]) / 65535.0).collect(),
+                    ))
+                };
+                let alpha = grey(&alpha_path)?;
+                let beta = match child(fileset, "betaMap") {
+                    Some(n) => Some(grey(&text(n, "path"))?),
+                    None => None,
+                };
                 regions.push(RegionRead {
                     rect: [
                         num(r, "x")?,
@@ -503,6 +533,7 @@ pub fn read(bytes: &[u8]) -> Result<Package> {
                     gamma_embedded: text(alpha_node, "gammaEmbedded").parse().unwrap_or(1.0),
                     warp,
                     alpha,
+                    beta,
                     id,
                 });
             }

@@ -214,10 +214,20 @@ pub fn write_black_png(
     lift: &[f32],
     opts: BlendOptions,
 ) -> Result<()> {
-    let bytes = mask_png_bytes(width, height, lift, opts, "omniwarp.black_gamma")?;
+    let bytes = black_png_bytes(width, height, lift, opts)?;
     atomic_write(path, |f| {
         f.write_all(&bytes).map_err(|e| Error::file(path, e))
     })
+}
+
+/// The PNG of [`write_black_png`], in memory.
+pub fn black_png_bytes(
+    width: u32,
+    height: u32,
+    lift: &[f32],
+    opts: BlendOptions,
+) -> Result<Vec<u8>> {
+    mask_png_bytes(width, height, lift, opts, "omniwarp.black_gamma")
 }
 
 /// Values in 0–1 as a grey PNG of `opts.bits`, raised to 1/γ, the gamma in text chunk `key`.

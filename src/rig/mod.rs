@@ -22,8 +22,8 @@ pub use photometry::{ChannelBlend, apply_blend_and_lift};
 pub use plan::{ChannelPlan, Overlap, Plan, PointPlan, WallPlan};
 
 pub use blend::{
-    BlendOptions, apply_gains, blend_png_bytes, gain, gains_image, signal_gains, write_black_png,
-    write_blend_png,
+    BlendOptions, apply_gains, black_png_bytes, blend_png_bytes, gain, gains_image, signal_gains,
+    write_black_png, write_blend_png,
 };
 pub use tiles::{SAMPLED_COLUMNS, default_rows};
 pub use warp::ChannelWarp;

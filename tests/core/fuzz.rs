@@ -450,6 +450,7 @@ fn mpcdi_seed() -> Vec<u8> {
         rect: [0.25, 0.5, 0.5, 0.25],
         warp: (3, 2, samples),
         alpha_png: alpha,
+        beta_png: None,
         alpha_bits: 16,
     };
     let header = Header {

@@ -71,6 +71,9 @@ struct RegionRead {
     uv: Vec<[f32; 2]>,
     /// 8 bits, as both real readers decode.
     alpha: Vec<u8>,
+    /// The beta map (black lift), 8 bits, if the fileset has one (the VESA library reads it as
+    /// an optional `betaMap` beside the alpha map).
+    beta: Option<Vec<u8>>,
 }
 
 fn read_region(pkg: &[u8], id: &str, c: Conventions) -> RegionRead {
@@ -85,6 +88,7 @@ fn read_region(pkg: &[u8], id: &str, c: Conventions) -> RegionRead {
         .descendants()
         .find(|n| n.has_tag_name("fileset") && n.attribute("region") == Some(id))
         .unwrap();
+    let has = |tag: &str| fileset.descendants().any(|n| n.has_tag_name(tag));
     let path = |tag: &str| -> String {
         fileset
             .descendants()
@@ -132,6 +136,12 @@ fn read_region(pkg: &[u8], id: &str, c: Conventions) -> RegionRead {
         nodes: [nx, ny],
         uv,
         alpha: png.to_luma8().into_raw(),
+        beta: has("betaMap").then(|| {
+            image::load_from_memory(&member(pkg, &path("betaMap")))
+                .unwrap()
+                .to_luma8()
+                .into_raw()
+        }),
     }
 }
 
@@ -175,7 +185,8 @@ fn sample(img: &image::RgbaImage, x: f64, y: f64) -> [f64; 3] {
 
 /// What the reader shows for the region: per pixel the warp interpolated between nodes, the
 /// media sampled where it says, times the alpha map (stored with its gamma, so in signal
-/// space). Transparent where a weighted node is unknown or alpha is 0.
+/// space), lifted by the beta map if there is one, `colour · alpha · (1 − beta) + beta` as
+/// SGCT and nDisplay apply it. Transparent where a weighted node is unknown or alpha is 0.
 fn show(r: &RegionRead, c: Conventions, media: &image::RgbaImage) -> image::RgbaImage {
     let [w, h] = r.size;
     let [nx, ny] = r.nodes;
@@ -211,12 +222,12 @@ fn show(r: &RegionRead, c: Conventions, media: &image::RgbaImage) -> image::Rgba
         let t = y + uv[1] * ys;
         let mv = if c.v_up { 1.0 - t } else { t };
         let col = sample(media, mu * mw - 0.5, mv * mh - 0.5);
-        image::Rgba([
-            (col[0] * a).round() as u8,
-            (col[1] * a).round() as u8,
-            (col[2] * a).round() as u8,
-            255,
-        ])
+        let b = r
+            .beta
+            .as_ref()
+            .map_or(0.0, |b| f64::from(b[j as usize * w + i as usize]) / 255.0);
+        let out = |c: f64| (c * a * (1.0 - b) + 255.0 * b).round() as u8;
+        image::Rgba([out(col[0]), out(col[1]), out(col[2]), 255])
     })
 }
 
@@ -264,7 +275,10 @@ impl Case {
     }
 
     fn export(&self, reader: &str) -> Vec<u8> {
-        let rig = fixtures().join("rig.json");
+        self.export_rig(&fixtures().join("rig.json"), reader)
+    }
+
+    fn export_rig(&self, rig: &Path, reader: &str) -> Vec<u8> {
         let out = self.path(&format!("{reader}.mpcdi"));
         omniwarp(&[
             "export",
@@ -289,7 +303,10 @@ impl Case {
     }
 
     fn render(&self, channel: &str) -> image::RgbaImage {
-        let rig = fixtures().join("rig.json");
+        self.render_rig(&fixtures().join("rig.json"), channel, "content.png")
+    }
+
+    fn render_rig(&self, rig: &Path, channel: &str, content: &str) -> image::RgbaImage {
         let out = self.path(&format!("ref-{channel}.png"));
         omniwarp(&[
             "render",
@@ -298,7 +315,7 @@ impl Case {
             "--channel",
             channel,
             "--content",
-            &self.path("content.png"),
+            &self.path(content),
             "--content-format",
             "equirect",
             "--out",
@@ -355,6 +372,63 @@ fn each_reader_shows_omniwarps_render_from_the_package_written_for_it() {
         );
         assert!(db < 20.0, "{c:?}: {db:.2} dB");
     }
+}
+
+/// Projectors with a contrast: the package carries each region's black lift as a beta map, and a
+/// VESA reader applying it shows what `omniwarp render` shows, in the dark and in the light.
+#[test]
+fn a_package_for_projectors_with_a_contrast_carries_their_black_lift() {
+    let case = Case::new();
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixtures().join("rig.json")).unwrap())
+            .unwrap();
+    for ch in doc["channels"].as_array_mut().unwrap() {
+        ch["contrast"] = 2000.into();
+    }
+    let rig = case.dir.path().join("contrast.json");
+    std::fs::write(&rig, doc.to_string()).unwrap();
+    let black = image::RgbaImage::from_pixel(1024, 512, image::Rgba([0, 0, 0, 255]));
+    black.save(case.path("black.png")).unwrap();
+
+    let pkg = case.export_rig(&rig, "vesa");
+    let xml = String::from_utf8(member(&pkg, "mpcdi.xml")).unwrap();
+    assert!(
+        xml.contains(r#"level="2""#) && xml.contains("<path>BetaMap-left.png</path>"),
+        "{xml}"
+    );
+    for ch in CHANNELS {
+        let r = read_region(&pkg, ch, VESA);
+        assert!(r.beta.is_some(), "{ch}: no beta map");
+        for (content, media) in [("black.png", &black), ("content.png", &case.media)] {
+            let reference = case.render_rig(&rig, ch, content);
+            let db = psnr(&reference, &show(&r, VESA, media));
+            eprintln!("{ch} {content}: {db:.2} dB with the beta map");
+            // Black is exact. Between black and white the reader's sum in signal space lifts
+            // a signal S by b·(1 − S) where ours lifts the light (docs/photometry.md): a few
+            // levels of 255 in the darks at 2,000:1.
+            let floor = if content == "black.png" { 50.0 } else { 35.0 };
+            assert!(db >= floor, "{ch} {content}: {db:.2} dB");
+            if content == "black.png" {
+                let lifted = reference.pixels().filter(|p| p.0[0] > 0).count();
+                assert!(
+                    lifted > reference.len() / 40,
+                    "{ch}: {lifted} pixels lifted"
+                );
+                // Without its beta map the reader shows the black unlifted, the bright seams
+                // back: the comparison above could not pass by accident.
+                let plain = RegionRead {
+                    beta: None,
+                    ..read_region(&pkg, ch, VESA)
+                };
+                let db = psnr(&reference, &show(&plain, VESA, media));
+                eprintln!("{ch} {content}: {db:.2} dB without it");
+                assert!(db < 40.0, "{ch}: {db:.2} dB without the beta map");
+            }
+        }
+    }
+    // Projectors without a contrast: no beta map, level 1, as before.
+    let xml = String::from_utf8(member(&case.export("vesa"), "mpcdi.xml")).unwrap();
+    assert!(!xml.contains("betaMap") && xml.contains(r#"level="1""#));
 }
 
 #[test]

@@ -680,6 +680,40 @@ async fn mpcdi_packages_use_the_reference_spellings_and_blank_unknown_samples() 
         (st, json(&body)["field"].as_str()),
         (StatusCode::BAD_REQUEST, Some("profile"))
     );
+
+    // Projectors with a contrast: every region carries its black lift, a level 2 package.
+    assert!(
+        mpcdi::read(&vesa).unwrap().buffers[0].regions[0]
+            .beta
+            .is_none()
+    );
+    let mut doc = flat_rig();
+    for ch in &mut doc.channels {
+        ch.contrast = Some(2000.0);
+    }
+    let body = serde_json::to_string(&doc).unwrap();
+    let (st, _, out) = call(&s, write("PUT", "/v1/rig", Some(1), body)).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&out));
+    let (st, _, body) = call(&s, get("/v1/export.mpcdi")).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let pkg = mpcdi::read(&body).unwrap();
+    assert_eq!(
+        (pkg.attr("level"), pkg.attr("color")),
+        (Some("2"), Some("2"))
+    );
+    let mut lifted = std::collections::HashMap::new();
+    for r in pkg.buffers.iter().flat_map(|b| &b.regions) {
+        let (bw, bh, beta) = r.beta.as_ref().expect("a beta map");
+        assert_eq!([*bw, *bh], r.resolution);
+        let n = beta.iter().filter(|b| **b > 0.0).count();
+        lifted.insert(r.id.as_str(), n as f64 / beta.len() as f64);
+    }
+    // Lifted where the left projector lights the wall alone; the right one's narrow canvas
+    // shows only the middle of the wall, where both overlap and nothing is lifted.
+    assert!(
+        lifted["left"] > 0.2 && lifted["left"] < 0.8 && lifted["right"] == 0.0,
+        "{lifted:?}"
+    );
 }
 
 #[tokio::test]

@@ -77,6 +77,7 @@ impl Owned {
             points: &self.job.computed.geometry.warp.points,
             eye: self.job.rig.eye,
             weights: &self.job.computed.geometry.weights,
+            lift: None,
             cancel,
         }
     }
@@ -298,10 +299,23 @@ pub async fn mpcdi_package(
         // A 2d buffer is a canvas the media server plays: channels with the same canvas share
         // one, each other canvas gets its own.
         let mut canvases: Vec<(String, [u32; 2])> = Vec::new();
+        // Every channel is lifted to one black, the rig's (docs/photometry.md).
+        let target = jobs.first().map_or(0.0, |(_, j)| j.rig.black_target());
         for (id, j) in jobs {
             let key = serde_json::to_string(&j.canvas).unwrap_or_default();
             let o = owned(j, &id)?;
-            let (mut region, err) = o.sources(cancel).region(profile, tol, alpha_bits, reader)?;
+            let rig = &o.job.rig;
+            let geometry = &o.job.computed.geometry;
+            let lift = rig
+                .channels
+                .iter()
+                .find(|c| c.id == id && rig.has_black())
+                .map(|ch| rig.black_lift(ch, &geometry.warp.points, &geometry.weights, target));
+            let src = Sources {
+                lift: lift.as_deref(),
+                ..o.sources(cancel)
+            };
+            let (mut region, err) = src.region(profile, tol, alpha_bits, reader)?;
             region.buffer = canvases
                 .iter()
                 .position(|(k, _)| *k == key)
