@@ -201,7 +201,7 @@ pub fn blend_png_bytes(
     weights: &[f32],
     opts: BlendOptions,
 ) -> Result<Vec<u8>> {
-    mask_png_bytes(width, height, weights, opts, "omniwarp.blend_gamma")
+    mask_png_bytes(width, height, weights, opts, "omniwarp.blend_gamma", false)
 }
 
 /// Writes a channel's black lift β (linear light) as a grey PNG in signal space, b = β^(1/γ),
@@ -227,16 +227,19 @@ pub fn black_png_bytes(
     lift: &[f32],
     opts: BlendOptions,
 ) -> Result<Vec<u8>> {
-    mask_png_bytes(width, height, lift, opts, "omniwarp.black_gamma")
+    mask_png_bytes(width, height, lift, opts, "omniwarp.black_gamma", true)
 }
 
-/// Values in 0–1 as a grey PNG of `opts.bits`, raised to 1/γ, the gamma in text chunk `key`.
+/// Values in 0–1 as a grey PNG of `opts.bits`, raised to 1/γ, the gamma in text chunk `key`;
+/// with `dither`, non-zero 8-bit values are dithered as the renderer dithers a lift
+/// ([`super::photometry::dither_at`]).
 fn mask_png_bytes(
     width: u32,
     height: u32,
     weights: &[f32],
     opts: BlendOptions,
     key: &str,
+    dither: bool,
 ) -> Result<Vec<u8>> {
     if !(opts.gamma.is_finite() && opts.gamma > 0.0) {
         return Err(Error::invalid(
@@ -251,10 +254,15 @@ fn mask_png_bytes(
         ));
     }
     let mut data = Vec::with_capacity(weights.len() * usize::from(opts.bits / 8));
-    for &w in weights {
+    for (n, &w) in weights.iter().enumerate() {
         let m = f64::from(w.clamp(0.0, 1.0)).powf(1.0 / opts.gamma);
         if opts.bits == 8 {
-            data.push((m * 255.0).round() as u8);
+            let d = if dither && w > 0.0 {
+                super::photometry::dither_at(n, width as usize)
+            } else {
+                0.0
+            };
+            data.push(((m * 255.0) as f32 + d).round().clamp(0.0, 255.0) as u8);
         } else {
             data.extend_from_slice(&((m * 65535.0).round() as u16).to_be_bytes());
         }

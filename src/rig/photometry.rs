@@ -161,9 +161,34 @@ impl Rig {
     }
 }
 
+/// A 4 × 4 Bayer matrix as offsets in (−0.5, 0.5) of one output step.
+const BAYER: [f32; 16] = {
+    let m = [0, 8, 2, 10, 12, 4, 14, 6, 3, 11, 1, 9, 15, 7, 13, 5];
+    let mut out = [0.0; 16];
+    let mut i = 0;
+    while i < 16 {
+        out[i] = (m[i] as f32 + 0.5) / 16.0 - 0.5;
+        i += 1;
+    }
+    out
+};
+
+/// The ordered dither's offset at pixel `n` of an image `width` pixels wide, in output steps:
+/// what the renderer adds to a lifted pixel before rounding it to 8 bits, and the 8-bit black
+/// masks to theirs, so that a reader adding the mask to black puts out the renderer's picture.
+pub(crate) fn dither_at(n: usize, width: usize) -> f32 {
+    BAYER[(n / width.max(1) % 4) * 4 + n % width.max(1) % 4]
+}
+
 /// Applies a channel's blend and black lift to its rendered picture (signal space, a projector
 /// of gamma γ): in linear light o = c·α·(1 − β) + β, colour only, alpha kept. With β all zero
 /// this is the blend alone, c·α^(1/γ) in signal space, as [`super::apply_gains`] does.
+///
+/// A lift is a few thousandths of white, a signal of 5–15 in 8 bits, where one step is a fifth
+/// of the light: rounded alike over a smooth lift, the steps add up to visible bands (the
+/// example dome's black varied by 8 % over 2° patches). Lifted pixels of integer types are
+/// therefore dithered (ordered, 4 × 4), so that a patch averages to the lift; unlifted pixels
+/// are rounded as before.
 pub fn apply_blend_and_lift<T: Pixel>(
     img: &mut Raster<T>,
     weights: &[f32],
@@ -189,15 +214,23 @@ pub fn apply_blend_and_lift<T: Pixel>(
         ));
     }
     let full = f64::from(T::FULL);
+    let width = img.width;
+    let steps = T::FULL > 1.0;
     img.data
         .par_iter_mut()
         .zip(weights.par_iter().zip(lift.par_iter()))
-        .for_each(|(px, (&alpha, &beta))| {
+        .enumerate()
+        .for_each(|(n, (px, (&alpha, &beta)))| {
             let (a, b) = (f64::from(alpha), f64::from(beta));
+            let dither = if steps && beta > 0.0 {
+                dither_at(n, width)
+            } else {
+                0.0
+            };
             let v = px.to_f32();
             let out = |c: f32| {
                 let linear = (f64::from(c) / full).max(0.0).powf(gamma);
-                ((linear * a * (1.0 - b) + b).powf(1.0 / gamma) * full) as f32
+                ((linear * a * (1.0 - b) + b).powf(1.0 / gamma) * full) as f32 + dither
             };
             *px = T::from_f32([out(v[0]), out(v[1]), out(v[2]), v[3]]);
         });
@@ -218,11 +251,18 @@ mod tests {
         let m = 0.25f64.powf(1.0 / 2.2);
         let expect = |v: f64| (v * m).round() as u8;
         assert_eq!(img.data[1], [0, expect(128.0), expect(255.0), 255]);
-        // Black content under a lift of 0.01 puts out 0.01 of light.
+        // Black content under a lift of 0.01 puts out 0.01 of light, dithered (pixel 2 of the
+        // first row takes the Bayer offset of cell 2).
         assert_eq!(
             img.data[2][0],
-            (0.01f64.powf(1.0 / 2.2) * 255.0).round() as u8
+            (0.01f64.powf(1.0 / 2.2) * 255.0 + f64::from(BAYER[2])).round() as u8
         );
+        // Over a 4 × 4 block the dither averages to the lift.
+        let mut block = Raster::<[u8; 4]>::new(4, 4);
+        apply_blend_and_lift(&mut block, &[1.0; 16], &[0.003; 16], 2.2).unwrap();
+        let mean = block.data.iter().map(|p| f64::from(p[0])).sum::<f64>() / 16.0;
+        let exact = 0.003f64.powf(1.0 / 2.2) * 255.0;
+        assert!((mean - exact).abs() < 0.07, "{mean} vs {exact}");
         let bad = apply_blend_and_lift(&mut img, &[1.0], &[0.0], 2.2).unwrap_err();
         assert!(bad.to_string().contains("lift"), "{bad}");
     }
