@@ -1960,3 +1960,61 @@ async fn previews_are_kept_and_rebuilt_only_where_an_edit_reaches() {
         (StatusCode::BAD_REQUEST, Some("compression"))
     );
 }
+
+/// A channel's raw EXR preview, linear f32 RGBA.
+async fn exr_preview(s: &std::sync::Arc<omniwarp::server::AppState>) -> Vec<[f32; 4]> {
+    let (st, _, body) = call(s, get("/v1/channels/left/render?format=exr")).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&body));
+    let file = tempfile::NamedTempFile::new().unwrap();
+    std::fs::write(file.path(), &body).unwrap();
+    omniwarp::image_io::read_exr_rgba(file.path())
+        .unwrap()
+        .0
+        .data
+}
+
+#[tokio::test]
+async fn previews_lift_the_black_where_the_rig_has_a_contrast() {
+    let s = state(None, None);
+    let plain = exr_preview(&s).await;
+    let mut doc = flat_rig();
+    for ch in &mut doc.channels {
+        ch.contrast = Some(2000.0);
+    }
+    let body = serde_json::to_string(&doc).unwrap();
+    let (st, _, out) = call(&s, write("PUT", "/v1/rig", Some(1), body)).await;
+    assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&out));
+    let lifted = exr_preview(&s).await;
+
+    // The lift the library computes for the channel, and the preview's light o = c·(1 − β) + β
+    // of the blended picture c (linear: the EXR preview has γ 1).
+    let rig = omniwarp::rig::Rig::from_doc(doc).unwrap();
+    let ch = &rig.channels[0];
+    let warp = rig.warp(ch);
+    let weights = rig.blend_weights(ch, &warp.points);
+    let beta = rig.black_lift(ch, &warp.points, &weights, rig.black_target());
+    assert_eq!((plain.len(), lifted.len()), (beta.len(), beta.len()));
+    let (mut worst, mut raised) = (0.0f32, 0);
+    for ((p, l), b) in plain.iter().zip(&lifted).zip(&beta) {
+        for k in 0..3 {
+            worst = worst.max((l[k] - (p[k] * (1.0 - b) + b)).abs());
+        }
+        raised += usize::from(*b > 0.0 && l[0] > p[0]);
+    }
+    assert!(worst < 1e-5, "lifted preview off by {worst}");
+    assert!(
+        raised * 4 > beta.len(),
+        "{raised} of {} pixels raised",
+        beta.len()
+    );
+
+    // The PNG preview (and so the output a render node follows) is lifted too.
+    let (_, _, png) = call(&s, get("/v1/channels/left/output.png")).await;
+    let png = image::load_from_memory(&png).unwrap().to_rgba8();
+    let dark = png
+        .pixels()
+        .zip(&beta)
+        .filter(|(p, b)| **b > 0.0 && p.0[..3] == [0, 0, 0])
+        .count();
+    assert_eq!(dark, 0, "lifted pixels left black in output.png");
+}

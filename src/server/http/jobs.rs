@@ -271,7 +271,16 @@ pub async fn job_from(s: &Arc<AppState>, id: &str, inputs: Inputs) -> Result<Job
             None => {
                 let warp = r.warp_unless(ch, cancel).ok_or(crate::Error::Cancelled)?;
                 let weights = r.blend_weights(ch, &warp.points);
-                Arc::new(Geometry { warp, weights })
+                // Every channel is lifted to the rig's one black (docs/photometry.md); the
+                // target is searched again per channel, a fraction of its warp's time.
+                let lift = r
+                    .has_black()
+                    .then(|| r.black_lift(ch, &warp.points, &weights, r.black_target()));
+                Arc::new(Geometry {
+                    warp,
+                    weights,
+                    lift,
+                })
             }
         };
         {

@@ -8,19 +8,61 @@ use crate::normalmap::NormalMap;
 use crate::raster::{Pixel, Raster};
 use crate::render::coverage::{face_size_for, faces_sampled};
 use crate::render::{self, Filter, Plan, Warp};
-use crate::rig::{apply_gains, signal_gains};
+use crate::rig::{apply_blend_and_lift, apply_gains, signal_gains};
 use crate::server::storage::cache::{Computed, GpuWarp};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// A channel's picture made a preview: desaturated by the tiles' f and attenuated by the blend
-/// weights (raised to 1/2.2: PNG previews are in signal space).
-pub fn finish(img: &mut Raster<[u8; 4]>, weights: &[f32], f: Option<&[f32]>) -> crate::Result<()> {
+/// weights (raised to 1/2.2: PNG previews are in signal space), lifted where the rig has a
+/// black level.
+pub fn finish(
+    img: &mut Raster<[u8; 4]>,
+    light: (&[f32], Option<&[f32]>),
+    f: Option<&[f32]>,
+) -> crate::Result<()> {
     if let Some(f) = f {
         crate::tiles::raster::saturation(img, f);
     }
-    apply_gains(img, &signal_gains(weights, 2.2)?)
+    Light::of(light.0, light.1, 2.2)?.apply(img)
+}
+
+/// What a preview is multiplied by and lifted with, at its pixels: the blend's gains in signal
+/// space, or with a black lift (docs/photometry.md) the weights and the lift.
+pub enum Light {
+    Gains(Vec<f32>),
+    Lifted {
+        weights: Vec<f32>,
+        lift: Vec<f32>,
+        gamma: f64,
+    },
+}
+
+impl Light {
+    /// The light of pixels with blend `weights` and black `lift`, for outputs of `gamma`.
+    pub fn of(weights: &[f32], lift: Option<&[f32]>, gamma: f64) -> crate::Result<Light> {
+        Ok(match lift {
+            Some(lift) => Light::Lifted {
+                weights: weights.to_vec(),
+                lift: lift.to_vec(),
+                gamma,
+            },
+            None => Light::Gains(signal_gains(weights, gamma)?),
+        })
+    }
+
+    /// Applies it to a picture of the size it was made for.
+    pub fn apply<T: Pixel>(&self, img: &mut Raster<T>) -> crate::Result<()> {
+        match self {
+            Light::Gains(g) => apply_gains(img, g),
+            Light::Lifted {
+                weights,
+                lift,
+                gamma,
+            } => apply_blend_and_lift(img, weights, lift, *gamma),
+        }
+    }
 }
 
 /// The cube face size a preview uses unless asked for one: texels as fine as the preview's
@@ -199,8 +241,8 @@ pub struct Prepared {
     grid: Grid,
     cube: Arc<PatternCube>,
     plan: Plan,
-    /// The blend weight raised to 1/2.2 (PNG previews are in signal space), per pixel.
-    gain: Arc<Vec<f32>>,
+    /// The blend (and black lift) per pixel, for PNG previews in signal space (γ 2.2).
+    light: Arc<Light>,
     /// The tiles' f at the preview's pixels where it is subsampled; at full scale the frame
     /// reads the computed warp's own (copying it took a 1080p preview 2–4 ms).
     f: Option<Vec<f32>>,
@@ -219,7 +261,7 @@ impl Prepared {
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        apply_gains(&mut img, &self.gain)?;
+        self.light.apply(&mut img)?;
         Ok(img)
     }
 }
@@ -289,9 +331,11 @@ impl Previews {
             face,
             filter: ask.filter,
         };
-        let gain = |c: &Computed| -> crate::Result<Arc<Vec<f32>>> {
-            Ok(Arc::new(signal_gains(
+        let light = |c: &Computed| -> crate::Result<Arc<Light>> {
+            let lift = c.geometry.lift.as_ref().map(|l| grid.values(l));
+            Ok(Arc::new(Light::of(
                 &grid.values(&c.geometry.weights),
+                lift.as_deref(),
                 2.2,
             )?))
         };
@@ -313,19 +357,19 @@ impl Previews {
                     let mut plan = b.plan.clone();
                     let content = b.cube.content();
                     let rows = plan.redo(Warp::Map(map), content, content.atlas(), changed)?;
-                    let gain = if Arc::ptr_eq(&b.computed.geometry, &computed.geometry) {
-                        b.gain.clone()
+                    let light = if Arc::ptr_eq(&b.computed.geometry, &computed.geometry) {
+                        b.light.clone()
                     } else {
-                        gain(computed)?
+                        light(computed)?
                     };
-                    Some((plan, b.cube.clone(), gain, Made::Rebuilt(rows)))
+                    Some((plan, b.cube.clone(), light, Made::Rebuilt(rows)))
                 } else {
                     None
                 }
             }
             None => None,
         };
-        let (plan, cube, gain, made) = match made {
+        let (plan, cube, light, made) = match made {
             Some(m) => m,
             None => {
                 let cube = cubes.get(&look, map);
@@ -341,7 +385,7 @@ impl Previews {
                     1,
                     ask.filter,
                 )?;
-                (plan, cube, gain(computed)?, Made::Built)
+                (plan, cube, light(computed)?, Made::Built)
             }
         };
         let prepared = Arc::new(Prepared {
@@ -352,7 +396,7 @@ impl Previews {
             grid,
             cube,
             plan,
-            gain,
+            light,
             f,
         });
         let mut all = self.0.lock().expect("preview lock");
@@ -378,7 +422,7 @@ impl Look {
         &self,
         cube: &CubeMap<T>,
         map: &NormalMap,
-        weights: &[f32],
+        light: (&[f32], Option<&[f32]>),
         f: Option<&[f32]>,
         gamma: f64,
     ) -> crate::Result<Raster<T>> {
@@ -388,7 +432,7 @@ impl Look {
         if let Some(f) = f {
             crate::tiles::raster::saturation(&mut img, f);
         }
-        apply_gains(&mut img, &signal_gains(weights, gamma)?)?;
+        Light::of(light.0, light.1, gamma)?.apply(&mut img)?;
         Ok(img)
     }
 
@@ -398,14 +442,14 @@ impl Look {
         g: &GpuWarp,
         cube: &CubeMap<[u8; 4]>,
         map: &NormalMap,
-        weights: &[f32],
+        light: (&[f32], Option<&[f32]>),
         f: Option<&[f32]>,
     ) -> crate::Result<Raster<[u8; 4]>> {
         let tex = crate::gpu::warp::CubeTexture::upload(&g.gpu, cube);
         let size = (map.width() as u32, map.height() as u32);
         let source = crate::gpu::warp::Source::Map(map);
         let mut img = g.pass.render(&g.gpu, &tex, source, size, f, None)?;
-        apply_gains(&mut img, &signal_gains(weights, 2.2)?)?;
+        Light::of(light.0, light.1, 2.2)?.apply(&mut img)?;
         Ok(img)
     }
 }

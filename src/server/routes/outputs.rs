@@ -454,6 +454,8 @@ async fn render_pattern(
         let grid = Grid::new(w, h, k);
         let map = grid.map(&computed.map)?;
         let weights = grid.values(&computed.geometry.weights);
+        let lift = computed.geometry.lift.as_ref().map(|l| grid.values(l));
+        let light = (weights.as_slice(), lift.as_deref());
         let f = computed.f.as_ref().map(|f| grid.values(f));
         if cancel.load(Ordering::Relaxed) {
             return Err(crate::Error::Cancelled.into());
@@ -465,12 +467,12 @@ async fn render_pattern(
         };
         if exr {
             let cube = look.cube::<[f32; 4]>([true; 6], 1.0);
-            let img = look.render(&cube, &map, &weights, f.as_deref(), 1.0)?;
+            let img = look.render(&cube, &map, light, f.as_deref(), 1.0)?;
             return Ok((exr_bytes(&img, &[], Precision::Float)?, None));
         }
         let cube = state.pattern_cubes.get(&look, &map);
         let g = gpu.as_ref().expect("the CPU's PNG previews returned above");
-        let img = look.render_gpu(g, &cube.cube, &map, &weights, f.as_deref())?;
+        let img = look.render_gpu(g, &cube.cube, &map, light, f.as_deref())?;
         Ok((png_bytes_with(&img, compression)?, None))
     })
     .await?;
@@ -528,8 +530,9 @@ async fn render_scene(
             .scene_previews
             .render(&ask, (&id, key, k), &map, cancel)?;
         let weights = grid.values(&computed.geometry.weights);
+        let lift = computed.geometry.lift.as_ref().map(|l| grid.values(l));
         let f = computed.f.as_ref().map(|f| grid.values(f));
-        finish(&mut img, &weights, f.as_deref())?;
+        finish(&mut img, (&weights, lift.as_deref()), f.as_deref())?;
         Ok((png_bytes_with(&img, compression)?, said))
     })
     .await?;

@@ -6,11 +6,13 @@ use crate::normalmap::NormalMap;
 use crate::rig::ChannelWarp;
 use std::sync::Arc;
 
-/// What depends on the rig alone: the geometric warp and the blend weights (tile edits change
-/// which content a pixel shows, not where its light lands).
+/// What depends on the rig alone: the geometric warp, the blend weights and, when the rig's
+/// projectors have a contrast, the black lift (tile edits change which content a pixel shows,
+/// not where its light lands).
 pub struct Geometry {
     pub warp: ChannelWarp,
     pub weights: Vec<f32>,
+    pub lift: Option<Vec<f32>>,
 }
 
 /// A channel's warp as it is shown: the geometry, the effective sampling map (the tile
