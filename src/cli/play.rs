@@ -39,7 +39,8 @@ pub struct PlayArgs {
     #[arg(long)]
     rig: Option<PathBuf>,
     /// With --rig: what every output shows: `content` (--content through the warp, blended) or
-    /// a test card (grid, crosshatch, bars, ids, edges).
+    /// a test card (grid, crosshatch, bars, ids, edges; black and white through the blend and
+    /// black lift).
     #[arg(long, default_value = "content", requires = "rig")]
     show: String,
     #[command(flatten)]
@@ -217,14 +218,17 @@ fn pictures(a: &PlayArgs) -> Result<Vec<Picture>> {
         let blend = channel_blend(&rig, ch, &warp.points, a.gamma)?;
         let map = warp.map;
         let image = match &what {
-            What::Card(card) => testcard::draw(
-                *card,
-                &map,
-                &Label {
+            What::Card(card) => {
+                let label = Label {
                     index,
                     id: &o.channel,
-                },
-            ),
+                };
+                let mut img = testcard::draw(*card, &map, &label);
+                if card.blended() {
+                    blend.apply(&mut img).map_err(flag_error)?;
+                }
+                img
+            }
             What::Content(c) => {
                 let (w, h) = (ch.width, ch.height);
                 let mut img = render::render(Warp::Map(&map), c, w, h, 1, Filter::Bilinear)

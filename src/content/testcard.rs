@@ -4,7 +4,9 @@
 //! whether its colours and black level match its neighbours (`bars`). `crosshatch` is the
 //! exception: lines of constant content azimuth and elevation every 10°, drawn through the
 //! channel's warp, so that where two projectors overlap their lines coincide exactly when the
-//! warps agree — the check an alignment ends with.
+//! warps agree — the check an alignment ends with. `black` and `white` are flat fields put out
+//! as content is, through the channel's blend and black lift: whether a dark frame is evenly
+//! dark across the overlaps and a white one evenly bright (docs/photometry.md).
 
 use crate::error::{Error, Result};
 use crate::normalmap::NormalMap;
@@ -26,12 +28,24 @@ pub enum Card {
     /// The raster's border, coloured corners and an arrow pointing up: where the raster ends and
     /// which way up it is.
     Edges,
+    /// Black, blended and lifted as content is: whether the overlaps vanish in the dark.
+    Black,
+    /// White, blended as content is: whether the blend is even where projectors overlap.
+    White,
 }
 
 impl Card {
     /// Every card's name, as [`Card::parse`] takes it (the `show` field of a channel's show
     /// request, besides `content`).
-    pub const NAMES: [&'static str; 5] = ["grid", "crosshatch", "bars", "ids", "edges"];
+    pub const NAMES: [&'static str; 7] = [
+        "grid",
+        "crosshatch",
+        "bars",
+        "ids",
+        "edges",
+        "black",
+        "white",
+    ];
 
     /// The card's name, one of [`Card::NAMES`].
     pub fn name(self) -> &'static str {
@@ -41,7 +55,15 @@ impl Card {
             Card::Bars => "bars",
             Card::Ids => "ids",
             Card::Edges => "edges",
+            Card::Black => "black",
+            Card::White => "white",
         }
+    }
+
+    /// Whether the card is put out as content is, through the channel's blend and black lift
+    /// ([`draw`] draws it flat; the caller applies them).
+    pub fn blended(self) -> bool {
+        matches!(self, Card::Black | Card::White)
     }
 
     /// The card of that name; an error listing [`Card::NAMES`] otherwise.
@@ -52,6 +74,8 @@ impl Card {
             "bars" => Card::Bars,
             "ids" => Card::Ids,
             "edges" => Card::Edges,
+            "black" => Card::Black,
+            "white" => Card::White,
             other => {
                 return Err(Error::invalid(
                     "pattern",
@@ -85,6 +109,8 @@ pub fn draw(card: Card, map: &NormalMap, label: &Label) -> Raster<[u8; 4]> {
         Card::Bars => bars(w, h),
         Card::Ids => ids(w, h, label),
         Card::Edges => edges(w, h),
+        Card::Black => Raster::from_fn(w, h, |_, _| BLACK),
+        Card::White => Raster::from_fn(w, h, |_, _| WHITE),
     }
 }
 

@@ -133,14 +133,21 @@ async fn a_test_card_is_sent_with_a_revision_announced_and_put_out() {
     assert_eq!(img.get_pixel(6, 6).0, [0, 0, 0, 255], "between the lines");
     // Each card differs; back to the content, the output is the channel's preview.
     let mut seen = vec![png];
-    for (rev, card) in [(2, "crosshatch"), (3, "bars"), (4, "ids"), (5, "edges")] {
+    for (rev, card) in [
+        (2, "crosshatch"),
+        (3, "bars"),
+        (4, "ids"),
+        (5, "edges"),
+        (6, "black"),
+        (7, "white"),
+    ] {
         assert_eq!(call(&s, send(card, Some(rev))).await.0, StatusCode::OK);
         let (st, _, png) = call(&s, get("/v1/channels/left/output.png?scale=2")).await;
         assert_eq!(st, StatusCode::OK, "{card}");
         assert!(!seen.contains(&png), "{card} looks like another card");
         seen.push(png);
     }
-    assert_eq!(call(&s, send("content", Some(6))).await.0, StatusCode::OK);
+    assert_eq!(call(&s, send("content", Some(8))).await.0, StatusCode::OK);
     let (_, _, out) = call(&s, get("/v1/channels/left/output.png?scale=2")).await;
     let (_, _, preview) = call(&s, get("/v1/channels/left/render?scale=2")).await;
     assert_eq!(out, preview);

@@ -836,3 +836,53 @@ async fn a_feed_that_falls_behind_is_told_so() {
     }
     assert!(seen.contains(r#""kind":"lagged","missed":144"#), "{seen}");
 }
+
+/// The `black` card through a rig whose projectors have a contrast is the channel's lifted
+/// black, the picture `render --rig` puts out for a black frame (docs/photometry.md).
+#[test]
+fn the_black_card_is_the_lifted_black_a_black_frame_renders_to() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut doc: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(rig_path("cylinder-270-3proj.json")).unwrap(),
+    )
+    .unwrap();
+    for ch in doc["channels"].as_array_mut().unwrap() {
+        ch["contrast"] = 2000.into();
+    }
+    let rig = d.join("rig.json");
+    std::fs::write(&rig, doc.to_string()).unwrap();
+    let black = d.join("black.png");
+    image::RgbImage::new(64, 32).save(&black).unwrap();
+    let reference = d.join("reference.png");
+    run(omniwarp()
+        .args(["render", "--rig"])
+        .arg(&rig)
+        .args([
+            "--channel",
+            "left",
+            "--content-format",
+            "equirect",
+            "--content",
+        ])
+        .arg(&black)
+        .arg("--out")
+        .arg(&reference));
+    let cards = d.join("cards");
+    run(omniwarp()
+        .args(["play", "--rig"])
+        .arg(&rig)
+        .args(["--show", "black", "--headless", "--output", "left", "--out"])
+        .arg(&cards));
+    let (want, got) = (read_rgb(&reference), read_rgb(&cards.join("left.png")));
+    let lifted = want.iter().filter(|v| **v > 0).count();
+    assert!(
+        lifted > want.len() / 4,
+        "{lifted} of {} values lifted",
+        want.len()
+    );
+    assert!(
+        want == got,
+        "the black card is not the rendered black frame"
+    );
+}

@@ -2017,4 +2017,21 @@ async fn previews_lift_the_black_where_the_rig_has_a_contrast() {
         .filter(|(p, b)| **b > 0.0 && p.0[..3] == [0, 0, 0])
         .count();
     assert_eq!(dark, 0, "lifted pixels left black in output.png");
+
+    // The black and white cards: flat fields put out through the lift and the blend, within
+    // the 8-bit step (and the lift's dither) of the light the model asks for.
+    for (rev, card, c) in [(1, "black", 0.0f64), (2, "white", 1.0)] {
+        let body = serde_json::json!({ "show": card }).to_string();
+        let (st, _, out) = call(&s, write("PUT", "/v1/channels/left/show", Some(rev), body)).await;
+        assert_eq!(st, StatusCode::OK, "{}", String::from_utf8_lossy(&out));
+        let (_, _, png) = call(&s, get("/v1/channels/left/output.png")).await;
+        let png = image::load_from_memory(&png).unwrap().to_rgba8();
+        let mut worst = 0.0f64;
+        for ((p, a), b) in png.pixels().zip(&weights).zip(&beta) {
+            let (a, b) = (f64::from(*a), f64::from(*b));
+            let want = (c * a * (1.0 - b) + b).powf(1.0 / 2.2) * 255.0;
+            worst = worst.max((f64::from(p.0[0]) - want).abs());
+        }
+        assert!(worst < 1.0, "{card}: off by {worst} of 255");
+    }
 }

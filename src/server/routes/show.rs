@@ -12,7 +12,7 @@ use crate::image_io::{Compression, png_bytes_with};
 use crate::server::ApiError;
 use crate::server::http::jobs::{job, run_job};
 use crate::server::http::state::{AppState, Query, Shown, if_match, parse_body, tagged};
-use crate::server::previews::pattern::Grid;
+use crate::server::previews::pattern::{Grid, Light};
 use crate::structured::PatternSet;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
@@ -226,8 +226,14 @@ pub async fn output(
     }
     let png = run_job(&s, move |_| {
         let k = scale as usize;
-        let map = Grid::new(computed.map.width(), computed.map.height(), k).map(&computed.map)?;
-        let img = testcard::draw(card, &map, &Label { index, id: &id });
+        let grid = Grid::new(computed.map.width(), computed.map.height(), k);
+        let map = grid.map(&computed.map)?;
+        let mut img = testcard::draw(card, &map, &Label { index, id: &id });
+        if card.blended() {
+            let weights = grid.values(&computed.geometry.weights);
+            let lift = computed.geometry.lift.as_ref().map(|l| grid.values(l));
+            Light::of(&weights, lift.as_deref(), 2.2)?.apply(&mut img)?;
+        }
         Ok(png_bytes_with(&img, Compression::Fast)?)
     })
     .await?;
